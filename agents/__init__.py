@@ -1,0 +1,1 @@
+"""Decision making: exploration, planning, merge coordination, rendezvous."""

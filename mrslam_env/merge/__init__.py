@@ -1,0 +1,1 @@
+"""Virtual-robot-motion map merging (pure numpy/scipy/skimage/numba)."""

@@ -1,0 +1,1 @@
+"""Simulator: pymunk world, robots, lidar, odometry, peer sensor, comm link (pymunk only here)."""

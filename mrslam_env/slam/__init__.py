@@ -1,0 +1,1 @@
+"""Onboard SLAM: occupancy grids, beam traversal, scan matching (pure numpy/numba)."""

@@ -1,0 +1,1 @@
+"""Worlds, experiment definitions, the experiment runner and the ``mrslam`` CLI."""
