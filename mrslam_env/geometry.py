@@ -11,6 +11,8 @@ Grids are indexed ``[row, col] = [iy, ix]`` with row 0 at the lowest y; a grid h
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -25,6 +27,7 @@ __all__ = [
     "transform_points",
     "world_to_cell",
     "wrap_angle",
+    "wrap_scalar",
 ]
 
 
@@ -34,6 +37,12 @@ def wrap_angle(angle: ArrayLike) -> FloatArray:
     wrapped = np.mod(a + np.pi, 2.0 * np.pi) - np.pi
     # np.mod maps +pi to -pi; the convention here keeps +pi and excludes -pi.
     return np.where(wrapped <= -np.pi, wrapped + 2.0 * np.pi, wrapped)
+
+
+def wrap_scalar(angle: float) -> float:
+    """Wrap one angle (radians) to (-pi, pi]; a fast path for Python floats."""
+    wrapped = math.remainder(angle, 2.0 * math.pi)
+    return math.pi if wrapped <= -math.pi else wrapped
 
 
 def pose(x: float, y: float, theta: float) -> FloatArray:

@@ -1,0 +1,182 @@
+"""Configuration as data: frozen dataclasses, one field per knob, unit and meaning stated.
+
+Every class validates itself in ``__post_init__`` and names the offending field and value.
+Change a value with :func:`dataclasses.replace`, e.g.
+``replace(EnvConfig(), lidar=replace(LidarConfig(), n_beams=180))``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+__all__ = [
+    "CommConfig",
+    "EnvConfig",
+    "LidarConfig",
+    "OdometryConfig",
+    "PeerSensorConfig",
+    "RewardConfig",
+    "RobotConfig",
+]
+
+
+def _check(cls_name: str, name: str, value: float, *, low: float = -math.inf,
+           high: float = math.inf, low_open: bool = False) -> None:
+    ok = math.isfinite(value) and (value > low if low_open else value >= low) and value <= high
+    if not ok:
+        bound = f"{'>' if low_open else '>='} {low}" + (f" and <= {high}" if high < math.inf else "")
+        raise ValueError(f"{cls_name}.{name} must be {bound}, got {value!r}")
+
+
+def _check_all(obj: object, *, positive: tuple[str, ...] = (), non_negative: tuple[str, ...] = (),
+               probability: tuple[str, ...] = ()) -> None:
+    name = type(obj).__name__
+    for f in positive:
+        _check(name, f, getattr(obj, f), low=0.0, low_open=True)
+    for f in non_negative:
+        _check(name, f, getattr(obj, f), low=0.0)
+    for f in probability:
+        _check(name, f, getattr(obj, f), low=0.0, high=1.0)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RobotConfig:
+    """A differential-drive robot with a circular footprint."""
+
+    radius: float = 0.2
+    """Footprint radius, m."""
+    mass: float = 10.0
+    """kg."""
+    max_speed: float = 1.0
+    """Linear speed at action 1.0, m/s (actions in [-1, 1] scale to [-max, max])."""
+    max_turn_rate: float = 2.0
+    """Angular speed at action 1.0, rad/s."""
+    max_acceleration: float = 2.0
+    """Limit on the change of the commanded linear speed, m/s^2."""
+    max_angular_acceleration: float = 6.0
+    """Limit on the change of the commanded angular speed, rad/s^2."""
+
+    def __post_init__(self) -> None:
+        _check_all(self, positive=tuple(f.name for f in fields(self)))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LidarConfig:
+    """A 360° planar lidar, beam i at ``-pi + i * 2 pi / n_beams`` from the heading."""
+
+    n_beams: int = 360
+    """Number of beams over the full circle."""
+    max_range: float = 8.0
+    """Maximum range, m; reported for beams with no return."""
+    range_noise_std: float = 0.01
+    """Standard deviation of the Gaussian range noise, m (0 turns it off)."""
+    dropout_probability: float = 0.01
+    """Probability that a beam returns nothing (reported as ``max_range``)."""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.n_beams, int) or self.n_beams < 4:
+            raise ValueError(f"LidarConfig.n_beams must be an int >= 4, got {self.n_beams!r}")
+        _check_all(self, positive=("max_range",), non_negative=("range_noise_std",),
+                   probability=("dropout_probability",))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class OdometryConfig:
+    """Odometry motion noise, the four-alpha model (Thrun et al., Probabilistic Robotics,
+    table 5.6): the motion between steps is split into rotation, translation, rotation, each
+    perturbed with a variance that grows with the motion."""
+
+    alpha1: float = 0.05
+    """Rotation variance per squared rotation, rad^2/rad^2."""
+    alpha2: float = 0.005
+    """Rotation variance per squared translation, rad^2/m^2."""
+    alpha3: float = 0.02
+    """Translation variance per squared translation, m^2/m^2."""
+    alpha4: float = 0.005
+    """Translation variance per squared rotation, m^2/rad^2."""
+
+    def __post_init__(self) -> None:
+        _check_all(self, non_negative=("alpha1", "alpha2", "alpha3", "alpha4"))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PeerSensorConfig:
+    """The rendezvous sensor: a noisy relative pose of another robot in line of sight."""
+
+    detect_range: float = 5.0
+    """Maximum detection distance, m."""
+    range_noise_std: float = 0.05
+    """m."""
+    bearing_noise_std: float = 0.02
+    """rad."""
+    heading_noise_std: float = 0.05
+    """rad."""
+
+    def __post_init__(self) -> None:
+        _check_all(self, positive=("detect_range",),
+                   non_negative=("range_noise_std", "bearing_noise_std", "heading_noise_std"))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CommConfig:
+    """The radio link between two robots."""
+
+    comm_range: float = 12.0
+    """Maximum link distance, m."""
+    blocked_by_walls: bool = False
+    """If true, the link also needs line of sight."""
+    packet_loss: float = 0.0
+    """Probability that an otherwise-up link is down on a given step."""
+
+    def __post_init__(self) -> None:
+        _check_all(self, positive=("comm_range",), probability=("packet_loss",))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RewardConfig:
+    """Per-step reward: newly observed area minus a collision penalty."""
+
+    area_weight: float = 1.0
+    """Reward per newly observed square metre."""
+    collision_penalty: float = 1.0
+    """Subtracted on each step in which the robot touches a wall or another robot."""
+    coverage_resolution: float = 0.1
+    """Cell size (m) of the grid on which newly observed area is counted."""
+
+    def __post_init__(self) -> None:
+        _check_all(self, non_negative=("area_weight", "collision_penalty"),
+                   positive=("coverage_resolution",))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class EnvConfig:
+    """Everything the environment needs besides the world."""
+
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    lidar: LidarConfig = field(default_factory=LidarConfig)
+    odometry: OdometryConfig = field(default_factory=OdometryConfig)
+    peer: PeerSensorConfig = field(default_factory=PeerSensorConfig)
+    comm: CommConfig = field(default_factory=CommConfig)
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    dt: float = 0.1
+    """Env step (control and sensor period), s."""
+    physics_substeps: int = 5
+    """Physics steps per env step (pymunk has no continuous collision detection: keep
+    ``max_speed * dt / substeps`` well below the wall thickness)."""
+    max_cycles: int = 2000
+    """Steps before truncation."""
+    starts: tuple[tuple[float, float, float], ...] | None = None
+    """Start poses (world frame) overriding the scenario's; robots beyond them get
+    automatic starts."""
+
+    def __post_init__(self) -> None:
+        _check_all(self, positive=("dt",))
+        for name in ("physics_substeps", "max_cycles"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 1:
+                raise ValueError(f"EnvConfig.{name} must be an int >= 1, got {value!r}")
+        if self.starts is not None:
+            for i, start in enumerate(self.starts):
+                if len(start) != 3 or not all(math.isfinite(v) for v in start):
+                    raise ValueError(f"EnvConfig.starts[{i}] must be finite (x, y, theta), got {start!r}")

@@ -1,0 +1,340 @@
+"""MultiRobotSlam: lidar robots exploring a 2-D world with an unknown relative pose.
+
+=====================  ===========================================================
+Import                 ``from mrslam_env import parallel_env``
+PettingZoo id          ``"mrslam/MultiRobotSlam-v0"`` (registered on import of
+                       ``mrslam_env.env``; ``pettingzoo.make("parallel", ...)``)
+Actions                Continuous
+Parallel API           Yes (AEC through :func:`env`)
+Agents                 ``robot_0 ... robot_{n-1}`` (default n = 2)
+Action shape           (2,)
+Action values          [-1, 1]
+Observation            ``Dict`` (below)
+=====================  ===========================================================
+
+Two (or N) differential-drive robots with 360° lidars move in a static 2-D world simulated
+with pymunk. Each robot starts at a pose nobody tells the others: its odometry and, later,
+its map are in its own frame. They can detect each other (peer sensor) and talk (comm link)
+only when close; see DESIGN.md for the whole research setting.
+
+Actions
+-------
+``Box(-1, 1, (2,), float32)`` per robot: ``(v, omega)`` normalised; ``v = a[0] *
+max_speed`` (m/s, negative drives backwards), ``omega = a[1] * max_turn_rate`` (rad/s,
+counter-clockwise). Values outside [-1, 1] are clipped; NaN or inf raise ``ValueError``
+naming the agent. The robot follows the command within its acceleration limits.
+
+Observations (per robot)
+------------------------
+==========  =====================  =======================================================
+key         space                  meaning
+==========  =====================  =======================================================
+scan        Box(0, R, (N,), f32)   lidar ranges (m), beam i at ``-pi + i 2pi/N`` from the
+                                   heading, counter-clockwise; ``R = max_range`` = no return
+odom        Box((3,), f64)         dead-reckoning pose ``(x, y, theta)`` in the robot's own
+                                   odom frame (origin = its start pose); drifts
+peer        Box((n-1, 4), f64)     per other robot (index order, self skipped):
+                                   ``(detected, range m, bearing rad, relative heading
+                                   rad)``; zeros when not detected (out of
+                                   ``detect_range`` or no line of sight)
+comm        MultiBinary(n-1)       1 when the link to that robot is up this step
+==========  =====================  =======================================================
+
+Rewards
+-------
+``area_weight *`` the area (m²) this robot's scan observed for the first time this step
+(counted on a world-frame grid of ``coverage_resolution``) ``- collision_penalty`` on steps
+with a contact.
+
+Episode end
+-----------
+No termination; truncation of all robots after ``config.max_cycles`` steps.
+
+Infos (per robot)
+-----------------
+``true_pose`` (3,) world-frame pose: **privileged**, for evaluation only, never for a
+policy that claims not to know it; ``collision`` (bool); ``observed_area`` (m², so far).
+
+Arguments
+---------
+``parallel_env(scenario="office", n_robots=2, seed=None, render_mode=None, config=None)``:
+``scenario`` is a name (``mrslam scenarios`` lists them; ``"procedural-7"`` picks a layout
+seed) or a :class:`~mrslam_env.sim.world.WorldSpec` (e.g. from a ROS map);
+``seed`` seeds the first ``reset`` when it is given none; ``render_mode`` is ``None`` or
+``"rgb_array"``; ``config`` an :class:`~mrslam_env.config.EnvConfig`.
+
+Version history
+---------------
+* v0: initial release.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+import gymnasium
+import numpy as np
+import pettingzoo
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from numpy.typing import NDArray
+from pettingzoo.utils import conversions
+from PIL import Image, ImageDraw
+
+from mrslam_env import ENV_ID
+from mrslam_env.config import EnvConfig
+from mrslam_env.sim.simulator import SimState, Simulator
+from mrslam_env.sim.world import WorldSpec, ground_truth_map
+from mrslam_env.slam.raycast import mark_scan_observed
+from mrslam_env.worlds import build_world
+
+__all__ = ["MultiRobotSlamEnv", "env", "parallel_env"]
+
+AgentID = str
+ObsDict = dict[str, NDArray[Any]]
+
+ROBOT_COLOURS = [(31, 119, 180), (214, 39, 40), (44, 160, 44), (148, 103, 189), (255, 127, 14)]
+
+
+class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.float32]]):
+    """PettingZoo ``ParallelEnv``; see the module docstring for the full card."""
+
+    metadata = {
+        "name": "mrslam_v0",
+        "render_modes": ["rgb_array"],
+        "render_fps": 10,
+        "is_parallelizable": True,
+    }
+
+    def __init__(
+        self,
+        scenario: str | WorldSpec = "office",
+        n_robots: int = 2,
+        seed: int | None = None,
+        render_mode: str | None = None,
+        config: EnvConfig | None = None,
+    ) -> None:
+        if not isinstance(n_robots, int) or n_robots < 1:
+            raise ValueError(f"n_robots must be an int >= 1, got {n_robots!r}")
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(
+                f"render_mode must be None or one of {self.metadata['render_modes']}, "
+                f"got {render_mode!r}"
+            )
+        self.world = scenario if isinstance(scenario, WorldSpec) else build_world(scenario)
+        self.config = config if config is not None else EnvConfig()
+        self.render_mode = render_mode
+        self.possible_agents = [f"robot_{i}" for i in range(n_robots)]
+        self.agents = list(self.possible_agents)
+        self._initial_seed = seed
+        self._coverage_template = ground_truth_map(
+            self.world, self.config.reward.coverage_resolution, margin=1.0
+        )
+        self.np_random, self.np_random_seed = seeding.np_random(seed)
+        self._sim: Simulator | None = None
+        self._render_base: NDArray[np.uint8] | None = None
+
+    # --- spaces -------------------------------------------------------------------------
+
+    @functools.lru_cache(maxsize=None)  # noqa: B019 - one space object per agent, as the API expects
+    def observation_space(self, agent: AgentID) -> spaces.Dict:
+        lidar, peer = self.config.lidar, self.config.peer
+        others = len(self.possible_agents) - 1
+        inf = np.inf
+        return spaces.Dict(
+            {
+                "scan": spaces.Box(0.0, lidar.max_range, (lidar.n_beams,), np.float32),
+                "odom": spaces.Box(
+                    np.array([-inf, -inf, -np.pi]), np.array([inf, inf, np.pi]), dtype=np.float64
+                ),
+                "peer": spaces.Box(
+                    np.tile([0.0, 0.0, -np.pi, -np.pi], (others, 1)),
+                    np.tile([1.0, peer.detect_range, np.pi, np.pi], (others, 1)),
+                    dtype=np.float64,
+                ),
+                "comm": spaces.MultiBinary(others),
+            }
+        )
+
+    @functools.lru_cache(maxsize=None)  # noqa: B019
+    def action_space(self, agent: AgentID) -> spaces.Box:
+        return spaces.Box(-1.0, 1.0, (2,), np.float32)
+
+    # --- the episode --------------------------------------------------------------------
+
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[AgentID, ObsDict], dict[AgentID, dict[str, Any]]]:
+        if seed is None and self._sim is None:
+            seed = self._initial_seed
+        if seed is not None:
+            self.np_random, self.np_random_seed = seeding.np_random(seed)
+        self.agents = list(self.possible_agents)
+        self._sim = Simulator(self.world, len(self.possible_agents), self.config, self.np_random)
+        self._observed = [
+            np.zeros(self._coverage_template.shape, dtype=bool) for _ in self.possible_agents
+        ]
+        self._observed_area = np.zeros(len(self.possible_agents))
+        self.steps = 0
+        state = self._sim.state
+        self._count_new_area(state)
+        return self._observations(state), self._infos(state)
+
+    def step(
+        self, actions: dict[AgentID, Any]
+    ) -> tuple[
+        dict[AgentID, ObsDict],
+        dict[AgentID, float],
+        dict[AgentID, bool],
+        dict[AgentID, bool],
+        dict[AgentID, dict[str, Any]],
+    ]:
+        if self._sim is None:
+            raise RuntimeError("step() called before reset()")
+        if not self.agents:
+            raise RuntimeError("step() called after the episode ended; call reset()")
+        commands = self._commands(actions)
+        state = self._sim.step(commands)
+        self.steps += 1
+        new_area = self._count_new_area(state)
+        reward_config = self.config.reward
+        rewards = {
+            agent: float(
+                reward_config.area_weight * new_area[i]
+                - reward_config.collision_penalty * state.collisions[i]
+            )
+            for i, agent in enumerate(self.possible_agents)
+        }
+        truncated = self.steps >= self.config.max_cycles
+        terminations = dict.fromkeys(self.agents, False)
+        truncations = dict.fromkeys(self.agents, truncated)
+        observations, infos = self._observations(state), self._infos(state)
+        if truncated:
+            self.agents = []
+        return observations, rewards, terminations, truncations, infos
+
+    def _commands(self, actions: dict[AgentID, Any]) -> NDArray[np.float64]:
+        unknown = set(actions) - set(self.possible_agents)
+        if unknown:
+            raise ValueError(f"actions for unknown agents {sorted(unknown)}; agents are {self.agents}")
+        commands = np.zeros((len(self.possible_agents), 2))
+        for i, agent in enumerate(self.possible_agents):
+            if agent not in actions:
+                raise ValueError(f"missing action for {agent}")
+            action = np.asarray(actions[agent], dtype=np.float64)
+            if action.shape != (2,):
+                raise ValueError(f"action for {agent} must have shape (2,), got {action.shape}")
+            if not np.all(np.isfinite(action)):
+                raise ValueError(f"action for {agent} is not finite: {action.tolist()}")
+            commands[i] = action
+        return commands
+
+    def _count_new_area(self, state: SimState) -> NDArray[np.float64]:
+        grid = self._coverage_template
+        new_cells = np.array(
+            [
+                mark_scan_observed(
+                    self._observed[i], grid.origin[0], grid.origin[1], grid.resolution,
+                    pose[0], pose[1], pose[2], scan,
+                )
+                for i, (pose, scan) in enumerate(zip(state.true_poses, state.scans, strict=True))
+            ],
+            dtype=np.float64,
+        )
+        area = new_cells * grid.resolution**2
+        self._observed_area += area
+        return area
+
+    def _observations(self, state: SimState) -> dict[AgentID, ObsDict]:
+        return {
+            agent: {
+                "scan": state.scans[i].astype(np.float32),
+                "odom": state.odometry[i].copy(),
+                "peer": state.peers[i].copy(),
+                "comm": state.comm[i].astype(np.int8),
+            }
+            for i, agent in enumerate(self.possible_agents)
+            if agent in self.agents
+        }
+
+    def _infos(self, state: SimState) -> dict[AgentID, dict[str, Any]]:
+        return {
+            agent: {
+                "true_pose": state.true_poses[i].copy(),
+                "collision": bool(state.collisions[i]),
+                "observed_area": float(self._observed_area[i]),
+            }
+            for i, agent in enumerate(self.possible_agents)
+            if agent in self.agents
+        }
+
+    # --- access for agents, evaluation and recording ---------------------------------------
+
+    @property
+    def simulator(self) -> Simulator:
+        """The simulator (privileged: ground truth lives here)."""
+        if self._sim is None:
+            raise RuntimeError("the environment has not been reset yet")
+        return self._sim
+
+    # --- rendering ----------------------------------------------------------------------
+
+    def render(self) -> NDArray[np.uint8] | None:
+        """Top-down ``(H, W, 3)`` uint8 image (y up) of walls, robots and scans."""
+        if self.render_mode is None:
+            gymnasium.logger.warn("render() called without a render_mode; returning None")
+            return None
+        if self._sim is None:
+            raise RuntimeError("render() called before reset()")
+        xmin, ymin, xmax, ymax = self.world.bounds
+        resolution = max(0.025, max(xmax - xmin, ymax - ymin) / 640.0)
+        if self._render_base is None:
+            grid = ground_truth_map(self.world, resolution, margin=0.5)
+            base = np.where(grid.occupied[..., None], 40, 235).astype(np.uint8)
+            self._render_base = np.repeat(base, 3, axis=2)
+            self._render_grid = grid
+        grid = self._render_grid
+        image = Image.fromarray(self._render_base[::-1].copy())
+        draw = ImageDraw.Draw(image)
+        rows = grid.shape[0]
+
+        def to_pixel(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[Any, Any]:
+            return (x - grid.origin[0]) / resolution, rows - (y - grid.origin[1]) / resolution
+
+        state = self._sim.state
+        lidar = self.config.lidar
+        angles = -np.pi + np.arange(lidar.n_beams) * (2 * np.pi / lidar.n_beams)
+        radius = self.config.robot.radius / resolution
+        for i, (pose, scan) in enumerate(zip(state.true_poses, state.scans, strict=True)):
+            colour = ROBOT_COLOURS[i % len(ROBOT_COLOURS)]
+            hit = scan < lidar.max_range
+            a = pose[2] + angles[hit]
+            px, py = to_pixel(pose[0] + scan[hit] * np.cos(a), pose[1] + scan[hit] * np.sin(a))
+            draw.point(list(zip(px.tolist(), py.tolist(), strict=True)), fill=colour)
+            cx, cy = to_pixel(np.array(pose[0]), np.array(pose[1]))
+            draw.ellipse([cx - radius, cy - radius, cx + radius, cy + radius], fill=colour)
+            hx, hy = to_pixel(
+                np.array(pose[0] + 1.5 * self.config.robot.radius * np.cos(pose[2])),
+                np.array(pose[1] + 1.5 * self.config.robot.radius * np.sin(pose[2])),
+            )
+            draw.line([(float(cx), float(cy)), (float(hx), float(hy))], fill=(0, 0, 0), width=2)
+        return np.asarray(image, dtype=np.uint8)
+
+    def close(self) -> None:
+        self._render_base = None
+
+
+def parallel_env(**kwargs: Any) -> MultiRobotSlamEnv:
+    """Create the parallel environment; arguments as :class:`MultiRobotSlamEnv`."""
+    return MultiRobotSlamEnv(**kwargs)
+
+
+def env(**kwargs: Any) -> pettingzoo.AECEnv[AgentID, ObsDict, NDArray[np.float32]]:
+    """The same environment through PettingZoo's AEC interface."""
+    return conversions.parallel_to_aec(parallel_env(**kwargs))
+
+
+if ENV_ID not in pettingzoo.parallel_registry:
+    pettingzoo.register("parallel", ENV_ID, entry_point="mrslam_env.env:parallel_env")
+    pettingzoo.register("aec", ENV_ID, entry_point="mrslam_env.env:env")
