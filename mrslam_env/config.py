@@ -21,16 +21,30 @@ __all__ = [
 ]
 
 
-def _check(cls_name: str, name: str, value: float, *, low: float = -math.inf,
-           high: float = math.inf, low_open: bool = False) -> None:
+def _check(
+    cls_name: str,
+    name: str,
+    value: float,
+    *,
+    low: float = -math.inf,
+    high: float = math.inf,
+    low_open: bool = False,
+) -> None:
     ok = math.isfinite(value) and (value > low if low_open else value >= low) and value <= high
     if not ok:
-        bound = f"{'>' if low_open else '>='} {low}" + (f" and <= {high}" if high < math.inf else "")
+        bound = f"{'>' if low_open else '>='} {low}" + (
+            f" and <= {high}" if high < math.inf else ""
+        )
         raise ValueError(f"{cls_name}.{name} must be {bound}, got {value!r}")
 
 
-def _check_all(obj: object, *, positive: tuple[str, ...] = (), non_negative: tuple[str, ...] = (),
-               probability: tuple[str, ...] = ()) -> None:
+def _check_all(
+    obj: object,
+    *,
+    positive: tuple[str, ...] = (),
+    non_negative: tuple[str, ...] = (),
+    probability: tuple[str, ...] = (),
+) -> None:
     name = type(obj).__name__
     for f in positive:
         _check(name, f, getattr(obj, f), low=0.0, low_open=True)
@@ -77,8 +91,12 @@ class LidarConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.n_beams, int) or self.n_beams < 4:
             raise ValueError(f"LidarConfig.n_beams must be an int >= 4, got {self.n_beams!r}")
-        _check_all(self, positive=("max_range",), non_negative=("range_noise_std",),
-                   probability=("dropout_probability",))
+        _check_all(
+            self,
+            positive=("max_range",),
+            non_negative=("range_noise_std",),
+            probability=("dropout_probability",),
+        )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -114,8 +132,11 @@ class PeerSensorConfig:
     """rad."""
 
     def __post_init__(self) -> None:
-        _check_all(self, positive=("detect_range",),
-                   non_negative=("range_noise_std", "bearing_noise_std", "heading_noise_std"))
+        _check_all(
+            self,
+            positive=("detect_range",),
+            non_negative=("range_noise_std", "bearing_noise_std", "heading_noise_std"),
+        )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -145,8 +166,11 @@ class RewardConfig:
     """Cell size (m) of the grid on which newly observed area is counted."""
 
     def __post_init__(self) -> None:
-        _check_all(self, non_negative=("area_weight", "collision_penalty"),
-                   positive=("coverage_resolution",))
+        _check_all(
+            self,
+            non_negative=("area_weight", "collision_penalty"),
+            positive=("coverage_resolution",),
+        )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -179,4 +203,6 @@ class EnvConfig:
         if self.starts is not None:
             for i, start in enumerate(self.starts):
                 if len(start) != 3 or not all(math.isfinite(v) for v in start):
-                    raise ValueError(f"EnvConfig.starts[{i}] must be finite (x, y, theta), got {start!r}")
+                    raise ValueError(
+                        f"EnvConfig.starts[{i}] must be finite (x, y, theta), got {start!r}"
+                    )

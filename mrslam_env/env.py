@@ -71,7 +71,7 @@ Version history
 from __future__ import annotations
 
 import functools
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium
 import numpy as np
@@ -81,9 +81,11 @@ from gymnasium.utils import seeding
 from numpy.typing import NDArray
 from pettingzoo.utils import conversions
 from PIL import Image, ImageDraw
+from scipy import ndimage
 
 from mrslam_env import ENV_ID
 from mrslam_env.config import EnvConfig
+from mrslam_env.gridmap import GridMap
 from mrslam_env.sim.simulator import SimState, Simulator
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
 from mrslam_env.slam.raycast import mark_scan_observed
@@ -100,7 +102,7 @@ ROBOT_COLOURS = [(31, 119, 180), (214, 39, 40), (44, 160, 44), (148, 103, 189), 
 class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.float32]]):
     """PettingZoo ``ParallelEnv``; see the module docstring for the full card."""
 
-    metadata = {
+    metadata: ClassVar[dict[str, Any]] = {
         "name": "mrslam_v0",
         "render_modes": ["rgb_array"],
         "render_fps": 10,
@@ -137,7 +139,7 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
 
     # --- spaces -------------------------------------------------------------------------
 
-    @functools.lru_cache(maxsize=None)  # noqa: B019 - one space object per agent, as the API expects
+    @functools.cache  # noqa: B019 - one space object per agent, as the API expects
     def observation_space(self, agent: AgentID) -> spaces.Dict:
         lidar, peer = self.config.lidar, self.config.peer
         others = len(self.possible_agents) - 1
@@ -157,7 +159,7 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
             }
         )
 
-    @functools.lru_cache(maxsize=None)  # noqa: B019
+    @functools.cache  # noqa: B019
     def action_space(self, agent: AgentID) -> spaces.Box:
         return spaces.Box(-1.0, 1.0, (2,), np.float32)
 
@@ -172,9 +174,11 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
             self.np_random, self.np_random_seed = seeding.np_random(seed)
         self.agents = list(self.possible_agents)
         self._sim = Simulator(self.world, len(self.possible_agents), self.config, self.np_random)
-        self._observed = [
-            np.zeros(self._coverage_template.shape, dtype=bool) for _ in self.possible_agents
-        ]
+        # Cells outside the robots' enclosure count as seen from the start: a no-return
+        # beam (reported at max range) passes through walls and must not earn area there.
+        observable = observable_cells(self._coverage_template, self._sim.starts)
+        self._observed = [~observable for _ in self.possible_agents]
+        self._observable_area = float(observable.sum()) * self._coverage_template.resolution**2
         self._observed_area = np.zeros(len(self.possible_agents))
         self.steps = 0
         state = self._sim.state
@@ -217,7 +221,9 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
     def _commands(self, actions: dict[AgentID, Any]) -> NDArray[np.float64]:
         unknown = set(actions) - set(self.possible_agents)
         if unknown:
-            raise ValueError(f"actions for unknown agents {sorted(unknown)}; agents are {self.agents}")
+            raise ValueError(
+                f"actions for unknown agents {sorted(unknown)}; agents are {self.agents}"
+            )
         commands = np.zeros((len(self.possible_agents), 2))
         for i, agent in enumerate(self.possible_agents):
             if agent not in actions:
@@ -235,8 +241,14 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         new_cells = np.array(
             [
                 mark_scan_observed(
-                    self._observed[i], grid.origin[0], grid.origin[1], grid.resolution,
-                    pose[0], pose[1], pose[2], scan,
+                    self._observed[i],
+                    grid.origin[0],
+                    grid.origin[1],
+                    grid.resolution,
+                    pose[0],
+                    pose[1],
+                    pose[2],
+                    scan,
                 )
                 for i, (pose, scan) in enumerate(zip(state.true_poses, state.scans, strict=True))
             ],
@@ -272,6 +284,14 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
     # --- access for agents, evaluation and recording ---------------------------------------
 
     @property
+    def observable_area(self) -> float:
+        """Area (m²) a robot could ever observe: free space connected to the starts and
+        the walls bounding it; ``observed_area / observable_area`` is a robot's coverage."""
+        if self._sim is None:
+            raise RuntimeError("the environment has not been reset yet")
+        return self._observable_area
+
+    @property
     def simulator(self) -> Simulator:
         """The simulator (privileged: ground truth lives here)."""
         if self._sim is None:
@@ -304,7 +324,7 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
 
         state = self._sim.state
         lidar = self.config.lidar
-        angles = -np.pi + np.arange(lidar.n_beams) * (2 * np.pi / lidar.n_beams)
+        angles = self._sim.beam_angles
         radius = self.config.robot.radius / resolution
         for i, (pose, scan) in enumerate(zip(state.true_poses, state.scans, strict=True)):
             colour = ROBOT_COLOURS[i % len(ROBOT_COLOURS)]
@@ -323,6 +343,17 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
 
     def close(self) -> None:
         self._render_base = None
+
+
+def observable_cells(grid: GridMap, starts: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Cells a robot could ever observe: the free space connected to any start, plus the
+    wall cells bordering it (8-connected)."""
+    labels, _ = ndimage.label(grid.free)
+    cells = grid.world_to_cell(starts[:, :2])
+    inside = grid.contains(cells)
+    start_labels = labels[cells[inside, 0], cells[inside, 1]]
+    region = np.isin(labels, start_labels[start_labels > 0])
+    return ndimage.binary_dilation(region, structure=np.ones((3, 3), dtype=bool))
 
 
 def parallel_env(**kwargs: Any) -> MultiRobotSlamEnv:

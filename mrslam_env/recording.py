@@ -123,7 +123,9 @@ def occupancy_image(grid: GridMap) -> NDArray[np.uint8]:
     return np.ascontiguousarray(grey[::-1])
 
 
-def grid_corner_pose(grid: GridMap, parent_from_grid: ArrayLike | None = None) -> NDArray[np.float64]:
+def grid_corner_pose(
+    grid: GridMap, parent_from_grid: ArrayLike | None = None
+) -> NDArray[np.float64]:
     """Pose ``(x, y, theta)`` of the outer lower-left corner of cell [0, 0].
 
     Parameters

@@ -32,7 +32,9 @@ def beam_angles(n_beams: int) -> FloatArray:
 
 
 @numba.njit(cache=True)
-def _segment_point_distance(px: float, py: float, ax: float, ay: float, bx: float, by: float) -> float:
+def _segment_point_distance(
+    px: float, py: float, ax: float, ay: float, bx: float, by: float
+) -> float:
     ex, ey = bx - ax, by - ay
     length2 = ex * ex + ey * ey
     t = 0.0
@@ -44,7 +46,9 @@ def _segment_point_distance(px: float, py: float, ax: float, ay: float, bx: floa
 
 
 @numba.njit(cache=True)
-def _beam_index_span(angle_lo: float, width: float, alpha0: float, dtheta: float) -> tuple[int, int]:
+def _beam_index_span(
+    angle_lo: float, width: float, alpha0: float, dtheta: float
+) -> tuple[int, int]:
     """First and last (unwrapped) beam index whose direction lies in
     ``[angle_lo, angle_lo + width]``; the caller takes indices modulo N."""
     u = (angle_lo - alpha0) % _TWO_PI

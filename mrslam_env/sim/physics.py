@@ -56,9 +56,9 @@ class Physics:
             body = pymunk.Body(robot.mass, moment)
             body.position = (float(x), float(y))
             body.angle = float(theta)
-            shape = pymunk.Circle(body, robot.radius)
-            shape.friction = 0.3
-            shape.collision_type = ROBOT
+            disc = pymunk.Circle(body, robot.radius)
+            disc.friction = 0.3
+            disc.collision_type = ROBOT
             control = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
             control.position = body.position
             pivot = pymunk.PivotJoint(control, body, (0.0, 0.0), (0.0, 0.0))
@@ -67,7 +67,7 @@ class Physics:
             gear = pymunk.GearJoint(control, body, 0.0, 1.0)
             gear.max_bias = 0.0
             gear.max_force = moment * 80.0
-            space.add(body, shape, control, pivot, gear)
+            space.add(body, disc, control, pivot, gear)
             self.bodies.append(body)
             self.controls.append(control)
         self.space = space

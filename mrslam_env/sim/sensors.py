@@ -76,7 +76,9 @@ def apply_odometry_increments(poses: FloatArray, increments: FloatArray) -> Floa
     )
 
 
-def add_lidar_noise(ranges: FloatArray, config: LidarConfig, rng: np.random.Generator) -> FloatArray:
+def add_lidar_noise(
+    ranges: FloatArray, config: LidarConfig, rng: np.random.Generator
+) -> FloatArray:
     """Gaussian range noise on returns and random dropouts (reported as max range).
 
     ``ranges`` has any shape, e.g. (n robots, N beams).
@@ -113,7 +115,11 @@ def peer_measurements(
         config.bearing_noise_std,
         config.heading_noise_std,
     )
-    distance = np.clip(np.hypot(delta[..., 0], delta[..., 1]) + noise[..., 0], 0.0, config.detect_range)
-    bearing = wrap_angle(np.arctan2(delta[..., 1], delta[..., 0]) - poses[:, None, 2] + noise[..., 1])
+    distance = np.clip(
+        np.hypot(delta[..., 0], delta[..., 1]) + noise[..., 0], 0.0, config.detect_range
+    )
+    bearing = wrap_angle(
+        np.arctan2(delta[..., 1], delta[..., 0]) - poses[:, None, 2] + noise[..., 1]
+    )
     heading = wrap_angle(poses[None, :, 2] - poses[:, None, 2] + noise[..., 2])
     return np.stack([distance, bearing, heading], axis=-1)

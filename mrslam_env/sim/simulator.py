@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from mrslam_env.config import EnvConfig
-from mrslam_env.sim.lidar import cast_scan, line_of_sight
+from mrslam_env.sim.lidar import beam_angles, cast_scan, line_of_sight
 from mrslam_env.sim.physics import Physics
 from mrslam_env.sim.sensors import (
     add_lidar_noise,
@@ -131,7 +131,10 @@ class Simulator:
         self.config = config
         self.rng = rng
         self.starts = choose_starts(
-            world, n_robots, config.robot.radius, rng,
+            world,
+            n_robots,
+            config.robot.radius,
+            rng,
             None if config.starts is None else np.asarray(config.starts),
         )
         self.physics = Physics(world, self.starts, config.robot)
@@ -140,6 +143,11 @@ class Simulator:
         self.time = 0.0
         self._last_true = self.physics.poses()
         self.state = self._sense(np.zeros(n_robots, dtype=bool))
+
+    @property
+    def beam_angles(self) -> FloatArray:
+        """Lidar beam angles (N,) relative to the heading, rad."""
+        return beam_angles(self.config.lidar.n_beams)
 
     def step(self, commands: FloatArray) -> SimState:
         """Advance one env period with normalised commands (n, 2) in [-1, 1].
@@ -166,8 +174,15 @@ class Simulator:
         segments = self.world.segments
         exact = np.stack(
             [
-                cast_scan(pose[0], pose[1], pose[2], config.lidar.n_beams,
-                          config.lidar.max_range, segments, discs)
+                cast_scan(
+                    pose[0],
+                    pose[1],
+                    pose[2],
+                    config.lidar.n_beams,
+                    config.lidar.max_range,
+                    segments,
+                    discs,
+                )
                 for pose in true
             ]
         )

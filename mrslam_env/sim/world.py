@@ -74,15 +74,21 @@ def polygon_edges(polygons: FloatArray) -> FloatArray:
     return np.concatenate([start, end], axis=1)
 
 
-def _ccw_convex(poly: FloatArray) -> FloatArray:
-    area2 = np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1])
-    if area2 < 0:
-        poly = poly[::-1].copy()
-    edges = np.roll(poly, -1, axis=0) - poly
-    cross = edges[:, 0] * np.roll(edges, -1, axis=0)[:, 1] - edges[:, 1] * np.roll(edges, -1, axis=0)[:, 0]
-    if abs(area2) < 1e-12 or np.any(cross < -1e-12):
-        raise ValueError(f"wall polygon is degenerate or not convex: {poly.tolist()}")
-    return poly
+def _ccw_convex(quads: FloatArray) -> FloatArray:
+    """Quads (K, 4, 2) in counter-clockwise order; raises if any is degenerate or not convex."""
+    x, y = quads[..., 0], quads[..., 1]
+    area2 = np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1)
+    quads = np.where((area2 < 0)[:, None, None], quads[:, ::-1], quads)
+    edges = np.roll(quads, -1, axis=1) - quads
+    following = np.roll(edges, -1, axis=1)
+    cross = edges[..., 0] * following[..., 1] - edges[..., 1] * following[..., 0]
+    bad = (np.abs(area2) < 1e-12) | np.any(cross < -1e-12, axis=1)
+    if bad.any():
+        index = int(np.argmax(bad))
+        raise ValueError(
+            f"wall polygon {index} is degenerate or not convex: {quads[index].tolist()}"
+        )
+    return quads
 
 
 @dataclass(frozen=True, slots=True, kw_only=True, eq=False)
@@ -121,7 +127,7 @@ class WorldSpec:
             raise ValueError(f"WorldSpec.walls must have shape (K>0, 4, 2), got {walls.shape}")
         if not np.all(np.isfinite(walls)):
             raise ValueError("WorldSpec.walls holds non-finite coordinates")
-        walls = np.stack([_ccw_convex(w) for w in walls])
+        walls = _ccw_convex(walls)
         starts = np.asarray(self.starts, dtype=np.float64).reshape(-1, 3)
         if len(starts) == 0 or not np.all(np.isfinite(starts)):
             raise ValueError("WorldSpec.starts must hold at least one finite (x, y, theta)")
@@ -178,7 +184,10 @@ class WorldSpec:
 
 
 def ground_truth_map(
-    world: WorldSpec, resolution: float, margin: float = 0.0
+    world: WorldSpec,
+    resolution: float,
+    margin: float = 0.0,
+    anchor: tuple[float, float] = (0.0, 0.0),
 ) -> GridMap:
     """Rasterise the world: a cell is OCCUPIED when its square overlaps any wall, else FREE.
 
@@ -189,17 +198,21 @@ def ground_truth_map(
         Cell size in metres.
     margin : float
         Extra border (m) around ``world.bounds``.
+    anchor : tuple of float
+        A point of the cell-corner lattice (m): the grid's origin is ``anchor`` plus whole
+        cells. Pass a map's origin to rasterise a world built from that map cell for cell.
 
     Returns
     -------
     GridMap
-        Origin on the resolution lattice through the world origin, covering the bounds.
+        Covering the bounds plus the margin.
     """
     if not (resolution > 0 and np.isfinite(resolution)):
         raise ValueError(f"resolution must be > 0 m, got {resolution}")
     xmin, ymin, xmax, ymax = world.bounds
-    x0 = np.floor((xmin - margin) / resolution) * resolution
-    y0 = np.floor((ymin - margin) / resolution) * resolution
+    ax, ay = float(anchor[0]), float(anchor[1])
+    x0 = ax + np.floor((xmin - margin - ax) / resolution + 1e-9) * resolution
+    y0 = ay + np.floor((ymin - margin - ay) / resolution + 1e-9) * resolution
     cols = int(np.ceil((xmax + margin - x0) / resolution - 1e-9))
     rows = int(np.ceil((ymax + margin - y0) / resolution - 1e-9))
     occupied = np.zeros((rows, cols), dtype=bool)
@@ -219,8 +232,10 @@ def ground_truth_map(
         cx = x0 + (np.arange(c0, c1) + 0.5) * resolution
         cy = y0 + (np.arange(r0, r1) + 0.5) * resolution
         overlap = (
-            (cx[None, :] + half > lo[0]) & (cx[None, :] - half < hi[0])
-            & (cy[:, None] + half > lo[1]) & (cy[:, None] - half < hi[1])
+            (cx[None, :] + half > lo[0])
+            & (cx[None, :] - half < hi[0])
+            & (cy[:, None] + half > lo[1])
+            & (cy[:, None] - half < hi[1])
         )
         if not axis_aligned:
             # Separating-axis test on the quad's edge normals (the cell's own axes are the

@@ -1,0 +1,111 @@
+"""A reactive wandering policy: drive forward, steer away from obstacles, meander.
+
+It reads only the robot's own lidar scan (never ground truth), so it is a fair baseline
+and a simple driver for data collection. Deterministic given its ``rng``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["WanderConfig", "WanderPolicy"]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WanderConfig:
+    """Tuning of :class:`WanderPolicy`; distances are from the robot centre."""
+
+    robot_radius: float = 0.2
+    """Footprint radius, m."""
+    stop_distance: float = 0.55
+    """Closer than this ahead: stop and turn in place, m."""
+    slow_distance: float = 1.5
+    """Closer than this ahead: slow down and steer away, m."""
+    cruise_speed: float = 0.8
+    """Normalised forward command in open space, in (0, 1]."""
+    front_half_angle: float = math.radians(35.0)
+    """Half-width of the sector that counts as 'ahead', rad."""
+    meander: float = 0.25
+    """Standard deviation of the random turn command per step (normalised)."""
+    meander_persistence: float = 0.95
+    """How much of the previous random turn carries over to the next step, in [0, 1)."""
+
+    def __post_init__(self) -> None:
+        if not 0 < self.robot_radius < self.stop_distance < self.slow_distance:
+            raise ValueError(
+                "WanderConfig needs 0 < robot_radius < stop_distance < slow_distance, got "
+                f"{self.robot_radius}, {self.stop_distance}, {self.slow_distance}"
+            )
+        if not 0 < self.cruise_speed <= 1:
+            raise ValueError(
+                f"WanderConfig.cruise_speed must be in (0, 1], got {self.cruise_speed}"
+            )
+        if not 0 <= self.meander_persistence < 1:
+            raise ValueError(
+                "WanderConfig.meander_persistence must be in [0, 1), "
+                f"got {self.meander_persistence}"
+            )
+
+
+class WanderPolicy:
+    """Maps a scan to a normalised ``(v, omega)`` action in [-1, 1].
+
+    Parameters
+    ----------
+    n_beams : int
+        Beams per scan; beam i points at ``-pi + i 2pi/N`` from the heading.
+    rng : numpy.random.Generator
+    config : WanderConfig
+    """
+
+    def __init__(
+        self, n_beams: int, rng: np.random.Generator, config: WanderConfig | None = None
+    ) -> None:
+        self.config = config if config is not None else WanderConfig()
+        self.rng = rng
+        self.angles = -np.pi + np.arange(n_beams) * (2.0 * np.pi / n_beams)
+        self._front = np.abs(self.angles) <= self.config.front_half_angle
+        self._left = (self.angles > self.config.front_half_angle) & (self.angles < 2.0)
+        self._right = (self.angles < -self.config.front_half_angle) & (self.angles > -2.0)
+        self._random_turn = 0.0
+        self._escape_direction = 0.0
+
+    def act(self, scan: NDArray[np.floating]) -> NDArray[np.float32]:
+        """One action for one scan (N,) of ranges in metres."""
+        config = self.config
+        scan = np.asarray(scan, dtype=np.float64)
+        # Scan points in the robot frame: x ahead, y to the left.
+        x = scan * np.cos(self.angles)
+        y = scan * np.sin(self.angles)
+        # 'Ahead' is the lane the footprint sweeps, plus a cone around the heading.
+        in_lane = (x > 0) & (np.abs(y) < config.robot_radius + 0.1)
+        front = float(np.min(x[in_lane | self._front], initial=np.inf))
+        left = float(np.mean(np.minimum(scan[self._left], 4.0)))
+        right = float(np.mean(np.minimum(scan[self._right], 4.0)))
+        # A persistent random turn (AR(1) process) so that the path meanders smoothly.
+        persistence = config.meander_persistence
+        innovation = config.meander * math.sqrt(1.0 - persistence**2)
+        self._random_turn = persistence * self._random_turn + innovation * float(
+            self.rng.standard_normal()
+        )
+
+        if front < config.stop_distance:
+            # Turn in place, keeping one direction until the way is clear (no dithering).
+            if self._escape_direction == 0.0:
+                self._escape_direction = 1.0 if left >= right else -1.0
+            return np.array([0.0, self._escape_direction], dtype=np.float32)
+        self._escape_direction = 0.0
+        away = float(np.clip((left - right) / max(left + right, 1e-6) * 2.0, -1.0, 1.0))
+        if front < config.slow_distance:
+            closeness = (config.slow_distance - front) / (
+                config.slow_distance - config.stop_distance
+            )
+            speed = config.cruise_speed * (1.0 - 0.7 * closeness)
+            turn = np.clip(away + math.copysign(closeness, away if away != 0 else 1.0), -1.0, 1.0)
+            return np.array([speed, turn], dtype=np.float32)
+        turn = np.clip(0.3 * away + self._random_turn, -1.0, 1.0)
+        return np.array([config.cruise_speed, turn], dtype=np.float32)

@@ -1,0 +1,457 @@
+"""Read and write ROS ``map_server`` map files (DESIGN §2).
+
+A map is a YAML file naming an image (relative to the YAML's folder) plus the image::
+
+    image: lab.pgm
+    mode: trinary            # optional: trinary (default) | scale | raw
+    resolution: 0.05         # m / pixel
+    origin: [-10.0, -5.0, 0.0]   # x, y (m) of the lower-left pixel's outer corner, yaw (rad)
+    negate: 0
+    occupied_thresh: 0.65
+    free_thresh: 0.196
+
+Reading follows ROS ``map_server`` (``image_loader.cpp``; nav2 ``map_io.cpp``): a grey
+value ``v`` in 0..255 gives the occupancy probability ``p = (255 - v) / 255`` (``v / 255``
+with ``negate: 1``); ``p > occupied_thresh`` is OCCUPIED, ``p < free_thresh`` is FREE and
+everything in between is UNKNOWN. ``mode: scale`` would keep the in-between values as a
+percentage in ROS; a :class:`~mrslam_env.gridmap.GridMap` is trinary, so they become
+UNKNOWN as in ``trinary`` mode. The grey levels that Cartographer and slam_toolbox write
+between the thresholds therefore read as UNKNOWN.
+
+``mode: raw`` (ROS: pixel value = cell value) is read as an occupancy percentage: a value
+``v`` in 0..100 (after ``negate``) is OCCUPIED when ``v >= 100 * occupied_thresh``, FREE
+when ``v <= 100 * free_thresh`` and UNKNOWN otherwise; values 101..255 (ROS writes 255 for
+-1) are UNKNOWN.
+
+Images: PGM ``P5`` (binary) and ``P2`` (ascii) with up to 8 bits per sample are parsed
+here (a ``maxval`` below 255 is stretched to 0..255 as SDL_image does); anything else
+(PNG, BMP, ...) goes through Pillow. Colour images are reduced to grey as the integer mean of
+the colour channels (ROS 1); the alpha channel is ignored (ROS averages alpha into trinary maps,
+a quirk not reproduced). Images with 16-bit samples are rejected. Image row 0 is the
+**top** of the map (highest y) whereas grid row 0 is the lowest y, so rows are flipped on
+read and write.
+
+The origin's yaw is accepted and ignored, as "many parts of the system" in ROS do; a
+non-zero yaw raises a :class:`UserWarning`, since the grid is then not where the file
+says it is.
+
+Writing produces what ``map_saver`` writes: a PGM ``P5`` with 0 = occupied, 254 = free,
+205 = unknown and a YAML with ``occupied_thresh: 0.65``, ``free_thresh: 0.196``,
+``negate: 0``, ``mode: trinary`` and a zero yaw. ``load_map(save_map(path, grid))``
+reproduces ``grid`` exactly.
+
+Every problem with an input file raises :class:`MapFileError` with a one-line message
+``"<file>: <problem>"``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from numpy.typing import NDArray
+
+from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
+
+__all__ = [
+    "FREE_PIXEL",
+    "OCCUPIED_PIXEL",
+    "UNKNOWN_PIXEL",
+    "MapFileError",
+    "grey_to_cells",
+    "load_map",
+    "read_image",
+    "save_map",
+]
+
+OCCUPIED_PIXEL = 0
+FREE_PIXEL = 254
+UNKNOWN_PIXEL = 205
+
+SAVED_OCCUPIED_THRESH = 0.65
+SAVED_FREE_THRESH = 0.196
+
+MODES = ("trinary", "scale", "raw")
+REQUIRED_KEYS = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
+
+PathLike = str | os.PathLike[str]
+
+
+class MapFileError(ValueError):
+    """A map file (YAML or image) is missing or malformed.
+
+    Parameters
+    ----------
+    path : path-like
+        The offending file.
+    problem : str
+        What is wrong with it; newlines are folded so the message stays on one line.
+
+    Attributes
+    ----------
+    path : pathlib.Path
+    problem : str
+    """
+
+    def __init__(self, path: PathLike, problem: str) -> None:
+        self.path = Path(path)
+        self.problem = " ".join(str(problem).split())
+        super().__init__(f"{self.path}: {self.problem}")
+
+
+# --------------------------------------------------------------------------------------
+# Images
+
+
+_PNM_TOKEN = re.compile(rb"\s*(?:#[^\n\r]*[\n\r]\s*)*(\S+)")
+
+
+def _read_pnm_grey(path: Path, data: bytes) -> NDArray[np.uint8]:
+    """Parse a PGM ``P5`` (binary) or ``P2`` (ascii) image into uint8 (height, width).
+
+    Samples are stretched to 0..255 when ``maxval < 255`` (as SDL_image does, so ROS sees
+    the same values); ``maxval > 255`` (16-bit) is rejected.
+    """
+    magic = data[:2]
+    position = 2
+    header: list[int] = []
+    for name in ("width", "height", "maxval"):
+        match = _PNM_TOKEN.match(data, position)
+        if match is None:
+            raise MapFileError(path, f"corrupt PGM header: missing {name}")
+        try:
+            header.append(int(match.group(1)))
+        except ValueError:
+            raise MapFileError(
+                path, f"corrupt PGM header: {name} is {match.group(1)[:20]!r}"
+            ) from None
+        position = match.end()
+    width, height, maxval = header
+    if width <= 0 or height <= 0:
+        raise MapFileError(path, f"empty image ({width} x {height} pixels)")
+    if maxval > 255:
+        raise MapFileError(path, f"16-bit images are not supported (PGM maxval {maxval})")
+    if maxval <= 0:
+        raise MapFileError(path, f"corrupt PGM header: maxval is {maxval}")
+    count = width * height
+    if magic == b"P5":
+        # Exactly one whitespace character separates the header from the raster.
+        raster = data[position + 1 : position + 1 + count]
+        if len(raster) < count:
+            raise MapFileError(
+                path,
+                f"corrupt image: PGM data truncated ({len(raster)} of {count} bytes)",
+            )
+        samples = np.frombuffer(raster, dtype=np.uint8).astype(np.int64)
+    else:
+        tokens = data[position:].split()
+        if len(tokens) < count:
+            raise MapFileError(
+                path,
+                f"corrupt image: PGM data truncated ({len(tokens)} of {count} values)",
+            )
+        try:
+            samples = np.array([int(t) for t in tokens[:count]], dtype=np.int64)
+        except ValueError:
+            raise MapFileError(path, "corrupt image: non-integer value in P2 data") from None
+    if samples.size and (samples.max() > maxval or samples.min() < 0):
+        raise MapFileError(path, f"corrupt image: pixel value above maxval {maxval}")
+    if maxval != 255:
+        samples = samples * 255 // maxval
+    return samples.astype(np.uint8).reshape(height, width)
+
+
+def _read_pillow_grey(path: Path) -> NDArray[np.uint8]:
+    """Read any Pillow-supported 8-bit image and reduce it to grey uint8 (height, width).
+
+    Colour is reduced as ROS 1 ``map_server`` does: the integer mean of the colour
+    channels (alpha ignored).
+    """
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as opened:
+            opened.load()
+            mode = opened.mode
+            if mode in ("I", "F") or mode.startswith("I;"):
+                raise MapFileError(
+                    path, f"16-bit or float images are not supported (Pillow mode {mode})"
+                )
+            if mode == "P":
+                image = opened.convert("RGBA" if "transparency" in opened.info else "RGB")
+            elif mode == "1":
+                image = opened.convert("L")
+            elif mode not in ("L", "LA", "RGB", "RGBA", "RGBX"):
+                image = opened.convert("RGB")
+            else:
+                image = opened
+            array = np.asarray(image)
+            mode = image.mode
+    except MapFileError:
+        raise
+    except UnidentifiedImageError as error:
+        raise MapFileError(path, "unreadable image: not a PGM or an image Pillow knows") from error
+    except (OSError, ValueError, SyntaxError) as error:
+        raise MapFileError(path, f"corrupt image: {error}") from error
+    if array.dtype != np.uint8:
+        raise MapFileError(path, f"16-bit images are not supported ({array.dtype})")
+    if array.ndim == 3:
+        colour_channels = 1 if mode == "LA" else 3
+        total = array[..., :colour_channels].astype(np.int64).sum(axis=2)
+        array = (total // colour_channels).astype(np.uint8)
+    if array.size == 0:
+        raise MapFileError(path, f"empty image ({array.shape[1]} x {array.shape[0]} pixels)")
+    return array
+
+
+def read_image(path: PathLike) -> NDArray[np.uint8]:
+    """Read a map image as grey levels.
+
+    Parameters
+    ----------
+    path : path-like
+        A PGM (``P5`` or ``P2``) or any 8-bit image Pillow can read (PNG, BMP, ...).
+
+    Returns
+    -------
+    ndarray of uint8, shape (height, width)
+        Grey levels, image row 0 = top of the picture (not flipped).
+
+    Raises
+    ------
+    MapFileError
+        Missing, unreadable, corrupt, empty or 16-bit image.
+    """
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise MapFileError(path, "image file not found") from None
+    except OSError as error:
+        raise MapFileError(path, f"cannot read image file ({error.strerror})") from error
+    if len(data) == 0:
+        raise MapFileError(path, "empty image file (0 bytes)")
+    if data[:2] in (b"P5", b"P2") and len(data) > 2 and data[2:3].isspace():
+        return _read_pnm_grey(path, data)
+    return _read_pillow_grey(path)
+
+
+def grey_to_cells(
+    grey: NDArray[np.uint8],
+    *,
+    negate: bool,
+    occupied_thresh: float,
+    free_thresh: float,
+    mode: str = "trinary",
+) -> NDArray[np.int8]:
+    """Apply map_server's thresholds to grey levels.
+
+    Parameters
+    ----------
+    grey : ndarray of uint8, shape (H, W)
+        Grey levels 0..255.
+    negate : bool
+        Whether white means occupied.
+    occupied_thresh, free_thresh : float
+        Probability thresholds in [0, 1], ``free_thresh < occupied_thresh``.
+    mode : {"trinary", "scale", "raw"}
+        See the module docstring; ``scale`` gives the same result as ``trinary``.
+
+    Returns
+    -------
+    ndarray of int8, shape (H, W)
+        ``FREE``, ``OCCUPIED`` or ``UNKNOWN``, same row order as ``grey``.
+    """
+    value = np.asarray(grey, dtype=np.int64)
+    if negate:
+        value = 255 - value
+    cells = np.full(value.shape, UNKNOWN, dtype=np.int8)
+    if mode == "raw":
+        percent = value
+        cells[(percent <= 100) & (percent >= 100.0 * occupied_thresh)] = OCCUPIED
+        cells[(percent <= 100) & (percent <= 100.0 * free_thresh)] = FREE
+        return cells
+    if mode not in ("trinary", "scale"):
+        raise ValueError(f"unsupported map mode {mode!r}; expected one of {MODES}")
+    occupancy = (255.0 - value) / 255.0
+    cells[occupancy > occupied_thresh] = OCCUPIED
+    cells[occupancy < free_thresh] = FREE
+    return cells
+
+
+# --------------------------------------------------------------------------------------
+# YAML
+
+
+def _number(yaml_path: Path, key: str, value: Any) -> float:
+    """A finite float from a YAML value (PyYAML reads ``1e-3`` as a string: accept it)."""
+    if isinstance(value, bool) or not isinstance(value, int | float | str):
+        raise MapFileError(yaml_path, f"{key} must be a number, got {value!r}")
+    try:
+        number = float(value)
+    except ValueError:
+        raise MapFileError(yaml_path, f"{key} must be a number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise MapFileError(yaml_path, f"{key} must be finite, got {value!r}")
+    return number
+
+
+def _read_yaml(yaml_path: Path) -> dict[str, Any]:
+    try:
+        text = yaml_path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise MapFileError(yaml_path, "map YAML file not found") from None
+    except IsADirectoryError:
+        raise MapFileError(yaml_path, "map YAML path is a directory") from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise MapFileError(yaml_path, f"cannot read map YAML ({error})") from error
+    try:
+        document = yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        problem = getattr(error, "problem", None) or type(error).__name__
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        raise MapFileError(yaml_path, f"invalid YAML syntax{where}: {problem}") from error
+    if not isinstance(document, dict):
+        raise MapFileError(
+            yaml_path, f"map YAML must be a mapping of keys, got {type(document).__name__}"
+        )
+    return document
+
+
+def load_map(path: PathLike) -> GridMap:
+    """Load a ROS ``map_server`` map (YAML + image).
+
+    Parameters
+    ----------
+    path : path-like
+        The map's YAML file. Its ``image`` is resolved relative to the YAML's folder.
+
+    Returns
+    -------
+    GridMap
+        Cells with row 0 at the lowest y (the image's bottom row), ``resolution`` in m per
+        cell, ``origin`` = the YAML's origin x, y (m). The origin yaw is ignored.
+
+    Raises
+    ------
+    MapFileError
+        Missing or unparsable YAML, a missing or invalid key, an unsupported mode, bad
+        thresholds, or a missing, corrupt, empty or 16-bit image.
+
+    Warns
+    -----
+    UserWarning
+        If the origin's yaw is non-zero (it is ignored, as in most of ROS).
+    """
+    yaml_path = Path(path)
+    document = _read_yaml(yaml_path)
+    missing = [key for key in REQUIRED_KEYS if key not in document]
+    if missing:
+        raise MapFileError(yaml_path, f"missing required key(s): {', '.join(missing)}")
+
+    image_name = document["image"]
+    if not isinstance(image_name, str) or not image_name.strip():
+        raise MapFileError(yaml_path, f"image must be a file name, got {image_name!r}")
+    resolution = _number(yaml_path, "resolution", document["resolution"])
+    if resolution <= 0:
+        raise MapFileError(yaml_path, f"resolution must be > 0 m/pixel, got {resolution}")
+    origin = document["origin"]
+    if not isinstance(origin, list | tuple) or len(origin) != 3:
+        raise MapFileError(yaml_path, f"origin must be 3 numbers [x, y, yaw], got {origin!r}")
+    x0, y0, yaw = (_number(yaml_path, "origin", value) for value in origin)
+    negate = document["negate"]
+    if isinstance(negate, bool) or negate in (0, 1):
+        negate = bool(negate)
+    else:
+        raise MapFileError(yaml_path, f"negate must be 0 or 1, got {negate!r}")
+    occupied_thresh = _number(yaml_path, "occupied_thresh", document["occupied_thresh"])
+    free_thresh = _number(yaml_path, "free_thresh", document["free_thresh"])
+    for key, value in (("occupied_thresh", occupied_thresh), ("free_thresh", free_thresh)):
+        if not 0.0 <= value <= 1.0:
+            raise MapFileError(yaml_path, f"{key} must lie in [0, 1], got {value}")
+    if free_thresh >= occupied_thresh:
+        raise MapFileError(
+            yaml_path,
+            f"free_thresh ({free_thresh}) must be below occupied_thresh ({occupied_thresh})",
+        )
+    mode = document.get("mode", "trinary")
+    if mode not in MODES:
+        raise MapFileError(
+            yaml_path, f"unsupported mode {mode!r}; expected one of {', '.join(MODES)}"
+        )
+    if yaw != 0.0:
+        warnings.warn(
+            f"{yaml_path}: origin yaw {yaw} rad is ignored (the map is read axis-aligned)",
+            UserWarning,
+            stacklevel=2,
+        )
+
+    image_path = Path(image_name)
+    if not image_path.is_absolute():
+        image_path = yaml_path.parent / image_path
+    if not image_path.is_file():
+        raise MapFileError(yaml_path, f"image file not found: {image_path}")
+    grey = read_image(image_path)
+    cells = grey_to_cells(
+        grey,
+        negate=negate,
+        occupied_thresh=occupied_thresh,
+        free_thresh=free_thresh,
+        mode=mode,
+    )
+    return GridMap(cells=np.ascontiguousarray(cells[::-1]), resolution=resolution, origin=(x0, y0))
+
+
+def save_map(path_yaml: PathLike, grid: GridMap, image_name: str | None = None) -> Path:
+    """Write a grid as a ROS ``map_server`` map: a PGM ``P5`` image and a YAML file.
+
+    Parameters
+    ----------
+    path_yaml : path-like
+        The YAML file to write; its folder must exist.
+    grid : GridMap
+        The map; row 0 (lowest y) becomes the image's bottom row.
+    image_name : str, optional
+        Image file name relative to the YAML's folder (default: the YAML's stem + ``.pgm``).
+        Sub-folders are created as needed.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path_yaml``.
+    """
+    yaml_path = Path(path_yaml)
+    if image_name is None:
+        image_name = yaml_path.with_suffix(".pgm").name
+    if Path(image_name).is_absolute():
+        raise ValueError(f"image_name must be relative to the YAML's folder, got {image_name}")
+    image_path = yaml_path.parent / image_name
+    image_path.parent.mkdir(parents=True, exist_ok=True)
+
+    pixels = np.full(grid.shape, UNKNOWN_PIXEL, dtype=np.uint8)
+    pixels[grid.cells == FREE] = FREE_PIXEL
+    pixels[grid.cells == OCCUPIED] = OCCUPIED_PIXEL
+    rows, cols = grid.shape
+    header = f"P5\n# CREATOR: mrslam {grid.resolution:.3f} m/pix\n{cols} {rows}\n255\n"
+    image_path.write_bytes(header.encode("ascii") + np.ascontiguousarray(pixels[::-1]).tobytes())
+
+    document = {
+        "image": Path(image_name).as_posix(),
+        "mode": "trinary",
+        "resolution": float(grid.resolution),
+        "origin": [float(grid.origin[0]), float(grid.origin[1]), 0.0],
+        "negate": 0,
+        "occupied_thresh": SAVED_OCCUPIED_THRESH,
+        "free_thresh": SAVED_FREE_THRESH,
+    }
+    yaml_path.write_text(
+        yaml.safe_dump(document, sort_keys=False, default_flow_style=None), encoding="utf-8"
+    )
+    return yaml_path

@@ -1,0 +1,157 @@
+"""The ``mrslam`` command line.
+
+``mrslam run``                 the end-to-end experiment on the default scenario
+``mrslam scenarios``           list worlds; ``--export NAME OUT.yaml`` writes a floor plan
+``mrslam bench sim``           simulator speed, side by side with IR-SIM
+
+Errors in what the user gave (unknown scenario, unreadable map, bad values) print one line
+``mrslam: error: ...`` and exit with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+__all__ = ["main"]
+
+EXIT_BAD_INPUT = 2
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="mrslam", description="Multi-robot SLAM research toolkit."
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    run = commands.add_parser("run", help="run the end-to-end experiment")
+    run.add_argument("--scenario", default="office", help="scenario name (see `mrslam scenarios`)")
+    run.add_argument("--map", type=Path, help="build the world from a ROS map YAML instead")
+    run.add_argument("--seed", type=int, default=0)
+    run.add_argument(
+        "--max-steps", type=int, default=2000, help="env steps of 0.1 s (default 2000)"
+    )
+    run.add_argument(
+        "--out", type=Path, default=Path("runs"), help="parent folder of the run folder"
+    )
+    run.add_argument("--name", help="run folder name (default <scenario>-seed<seed>)")
+    run.add_argument("--no-record", action="store_true", help="do not write recording.rrd")
+    run.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
+
+    scen = commands.add_parser("scenarios", help="list the worlds, or export one as a ROS map")
+    scen.add_argument(
+        "--export",
+        nargs=2,
+        metavar=("NAME", "OUT.yaml"),
+        help="write NAME's ground-truth floor plan as a ROS map (PGM + YAML)",
+    )
+    scen.add_argument("--resolution", type=float, default=0.05, help="export resolution, m/cell")
+    scen.add_argument("--json", action="store_true")
+
+    bench = commands.add_parser("bench", help="benchmarks")
+    kinds = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
+    sim = kinds.add_parser("sim", help="env steps per second, side by side with IR-SIM")
+    sim.add_argument(
+        "--scenarios", nargs="*", help="scenario names (default: all hand-made + procedural-0)"
+    )
+    sim.add_argument("--steps", type=int, default=1000)
+    sim.add_argument("--repeats", type=int, default=3)
+    sim.add_argument("--no-irsim", action="store_true", help="skip the IR-SIM comparison")
+    sim.add_argument("--json", action="store_true")
+    return parser
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from scenarios.runner import RunConfig, run_experiment
+
+    config = RunConfig(
+        scenario=args.scenario,
+        map_path=args.map,
+        seed=args.seed,
+        max_steps=args.max_steps,
+        out=args.out,
+        name=args.name,
+        record=not args.no_record,
+        progress=not args.json,
+    )
+    report = run_experiment(config)
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        robots = ", ".join(
+            f"{agent} coverage {r['coverage']:.0%}" for agent, r in report["robots"].items()
+        )
+        summary = f"{report['steps']} steps in {report['wall_time']:.1f} s"
+        print(f"{report['scenario']}: {summary}; {robots}")
+        print(f"outputs in {report['outputs']['run_dir']}")
+    return 0
+
+
+def _cmd_scenarios(args: argparse.Namespace) -> int:
+    from mrslam_env.worlds import available_scenarios, build_world
+
+    if args.export:
+        from mrslam_env.mapio import save_map
+        from mrslam_env.sim.world import ground_truth_map
+
+        name, out = args.export
+        if not args.resolution > 0:
+            raise ValueError(f"--resolution must be > 0, got {args.resolution}")
+        world = build_world(name)
+        path = save_map(Path(out), ground_truth_map(world, args.resolution, margin=0.5))
+        print(f"wrote {path}")
+        return 0
+    catalogue = available_scenarios()
+    rows = [
+        {"name": f"{key}[-SEED]" if s.parametric else key, "description": s.description}
+        for key, s in sorted(catalogue.items())
+    ]
+    if args.json:
+        print(json.dumps(rows, indent=2))
+    else:
+        width = max(len(r["name"]) for r in rows)
+        for r in rows:
+            print(f"{r['name']:<{width}}  {r['description']}")
+    return 0
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from mrslam_env.worlds import available_scenarios, build_world
+    from scenarios.bench import bench_sim
+
+    names = args.scenarios or [
+        ("procedural-0" if s.parametric else key)
+        for key, s in sorted(available_scenarios().items())
+    ]
+    worlds = {name: build_world(name) for name in names}
+    rows = bench_sim(worlds, n_steps=args.steps, repeats=args.repeats, irsim=not args.no_irsim)
+    if args.json:
+        print(json.dumps([row.as_dict() for row in rows], indent=2))
+        return 0
+    print(f"env steps/s, 2 robots x 360 beams, median of {args.repeats} x {args.steps} steps")
+    print(f"{'scenario':<14} {'mrslam':>10} {'IR-SIM':>10} {'ratio':>7}")
+    for row in rows:
+        theirs = "-" if row.irsim_steps_per_s is None else f"{row.irsim_steps_per_s:10.0f}"
+        ratio = "-" if row.ratio is None else f"{row.ratio:6.1f}x"
+        print(f"{row.scenario:<14} {row.mrslam_steps_per_s:>10.0f} {theirs:>10} {ratio:>7}")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``mrslam`` console script; returns the exit status."""
+    parser = _build_parser()
+    args = parser.parse_args(argv)
+    handlers = {"run": _cmd_run, "scenarios": _cmd_scenarios, "bench": _cmd_bench}
+    try:
+        return handlers[args.command](args)
+    except (ValueError, OSError) as error:
+        message = str(error).splitlines()[0] if str(error) else type(error).__name__
+        print(f"mrslam: error: {message}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())
