@@ -162,7 +162,7 @@ class RewardConfig:
     """Reward per newly observed square metre."""
     collision_penalty: float = 1.0
     """Subtracted on each step in which the robot touches a wall or another robot."""
-    coverage_resolution: float = 0.1
+    coverage_resolution: float = 0.2
     """Cell size (m) of the grid on which newly observed area is counted."""
 
     def __post_init__(self) -> None:
@@ -185,9 +185,10 @@ class EnvConfig:
     reward: RewardConfig = field(default_factory=RewardConfig)
     dt: float = 0.1
     """Env step (control and sensor period), s."""
-    physics_substeps: int = 5
-    """Physics steps per env step (pymunk has no continuous collision detection: keep
-    ``max_speed * dt / substeps`` well below the wall thickness)."""
+    physics_substeps: int = 2
+    """Physics steps per env step. pymunk has no continuous collision detection: keep the
+    travel per substep, ``max_speed * dt / substeps`` (5 cm by default), well below the
+    robot radius plus half the thinnest wall, so that no contact can be stepped over."""
     max_cycles: int = 2000
     """Steps before truncation."""
     starts: tuple[tuple[float, float, float], ...] | None = None

@@ -63,6 +63,12 @@ seed) or a :class:`~mrslam_env.sim.world.WorldSpec` (e.g. from a ROS map);
 ``seed`` seeds the first ``reset`` when it is given none; ``render_mode`` is ``None`` or
 ``"rgb_array"``; ``config`` an :class:`~mrslam_env.config.EnvConfig`.
 
+Pickling
+--------
+Supported (``pickle``, ``copy.deepcopy``). A restored env continues the same run, except
+that pymunk does not carry cached contact impulses across a pickle: while a robot touches
+a wall, the two runs may differ at the micrometre level.
+
 Version history
 ---------------
 * v0: initial release.
@@ -328,11 +334,16 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         radius = self.config.robot.radius / resolution
         for i, (pose, scan) in enumerate(zip(state.true_poses, state.scans, strict=True)):
             colour = ROBOT_COLOURS[i % len(ROBOT_COLOURS)]
-            hit = scan < lidar.max_range
-            a = pose[2] + angles[hit]
-            px, py = to_pixel(pose[0] + scan[hit] * np.cos(a), pose[1] + scan[hit] * np.sin(a))
-            draw.point(list(zip(px.tolist(), py.tolist(), strict=True)), fill=colour)
+            tint = tuple(int(0.25 * c + 0.75 * 235) for c in colour)
             cx, cy = to_pixel(np.array(pose[0]), np.array(pose[1]))
+            # The fan shows what returned; a no-return beam says nothing, so it draws nothing.
+            hit = scan < lidar.max_range
+            shown = np.where(hit, scan, 0.0)
+            a = pose[2] + angles
+            px, py = to_pixel(pose[0] + shown * np.cos(a), pose[1] + shown * np.sin(a))
+            draw.polygon(list(zip(px.tolist(), py.tolist(), strict=True)), fill=tint)
+            for x, y in zip(px[hit].tolist(), py[hit].tolist(), strict=True):
+                draw.rectangle([x - 1, y - 1, x + 1, y + 1], fill=colour)
             draw.ellipse([cx - radius, cy - radius, cx + radius, cy + radius], fill=colour)
             hx, hy = to_pixel(
                 np.array(pose[0] + 1.5 * self.config.robot.radius * np.cos(pose[2])),

@@ -33,10 +33,8 @@ __all__ = [
 
 def wrap_angle(angle: ArrayLike) -> FloatArray:
     """Wrap angles (radians) to (-pi, pi]."""
-    a = np.asarray(angle, dtype=np.float64)
-    wrapped = np.mod(a + np.pi, 2.0 * np.pi) - np.pi
-    # np.mod maps +pi to -pi; the convention here keeps +pi and excludes -pi.
-    return np.where(wrapped <= -np.pi, wrapped + 2.0 * np.pi, wrapped)
+    # mod(pi - a, 2 pi) lies in [0, 2 pi), so the result lies in (-pi, pi].
+    return np.pi - np.mod(np.pi - np.asarray(angle, dtype=np.float64), 2.0 * np.pi)
 
 
 def wrap_scalar(angle: float) -> float:

@@ -82,6 +82,56 @@ def traverse(
 
 
 @numba.njit(cache=True)
+def _mark_segment(
+    observed: NDArray[np.bool_],
+    x0: float,
+    y0: float,
+    x1: float,
+    y1: float,
+    origin_x: float,
+    origin_y: float,
+    resolution: float,
+) -> int:
+    """:func:`traverse` fused with marking, for speed: marks in-grid cells on the segment,
+    returns how many were unmarked before."""
+    rows, cols = observed.shape
+    gx0, gy0 = (x0 - origin_x) / resolution, (y0 - origin_y) / resolution
+    gx1, gy1 = (x1 - origin_x) / resolution, (y1 - origin_y) / resolution
+    ix, iy = math.floor(gx0), math.floor(gy0)
+    dx, dy = gx1 - gx0, gy1 - gy0
+    step_x = 1 if dx > 0 else -1
+    step_y = 1 if dy > 0 else -1
+    t_delta_x = abs(1.0 / dx) if dx != 0.0 else math.inf
+    t_delta_y = abs(1.0 / dy) if dy != 0.0 else math.inf
+    if dx > 0:
+        t_max_x = (ix + 1 - gx0) / dx
+    elif dx < 0:
+        t_max_x = (gx0 - ix) / -dx
+    else:
+        t_max_x = math.inf
+    if dy > 0:
+        t_max_y = (iy + 1 - gy0) / dy
+    elif dy < 0:
+        t_max_y = (gy0 - iy) / -dy
+    else:
+        t_max_y = math.inf
+    n_steps = abs(math.floor(gx1) - ix) + abs(math.floor(gy1) - iy)
+    newly = 0
+    for k in range(n_steps + 1):
+        if k > 0:
+            if t_max_x < t_max_y:
+                ix += step_x
+                t_max_x += t_delta_x
+            else:
+                iy += step_y
+                t_max_y += t_delta_y
+        if 0 <= iy < rows and 0 <= ix < cols and not observed[iy, ix]:
+            observed[iy, ix] = True
+            newly += 1
+    return newly
+
+
+@numba.njit(cache=True)
 def mark_scan_observed(
     observed: NDArray[np.bool_],
     origin_x: float,
@@ -98,20 +148,10 @@ def mark_scan_observed(
     became observed (were ``False`` before).
     """
     n = ranges.shape[0]
-    rows, cols = observed.shape
     dtheta = 2.0 * math.pi / n
-    max_r = 0.0
-    for i in range(n):
-        max_r = max(max_r, ranges[i])
-    buffer = np.empty((int(2.0 * max_r / resolution) + 4, 2), dtype=np.int64)
     newly = 0
     for i in range(n):
         a = heading - math.pi + i * dtheta
         ex, ey = x + ranges[i] * math.cos(a), y + ranges[i] * math.sin(a)
-        count = traverse(x, y, ex, ey, origin_x, origin_y, resolution, buffer)
-        for k in range(count):
-            iy, ix = buffer[k, 0], buffer[k, 1]
-            if 0 <= iy < rows and 0 <= ix < cols and not observed[iy, ix]:
-                observed[iy, ix] = True
-                newly += 1
+        newly += _mark_segment(observed, x, y, ex, ey, origin_x, origin_y, resolution)
     return newly

@@ -1,0 +1,120 @@
+"""The ``mrslam`` command line, run in-process through ``main`` and once as a real process."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+
+from mrslam_env.gridmap import FREE, OCCUPIED
+from mrslam_env.mapio import load_map
+from mrslam_env.worlds import build_world
+from scenarios.cli import main
+
+
+def run_cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    status = main(list(argv))
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def test_scenarios_lists_every_world(capsys) -> None:
+    status, out, _ = run_cli(capsys, "scenarios", "--json")
+    assert status == 0
+    names = {row["name"] for row in json.loads(out)}
+    assert {"office", "warehouse", "maze", "twin_wings", "procedural[-SEED]"} <= names
+
+
+def test_export_writes_a_floor_plan_in_the_world_frame(capsys, tmp_path) -> None:
+    status, _, _ = run_cli(
+        capsys, "scenarios", "--export", "office", str(tmp_path / "office.yaml"),
+        "--resolution", "0.1",
+    )
+    assert status == 0
+    grid = load_map(tmp_path / "office.yaml")
+    assert grid.resolution == pytest.approx(0.1)
+    world = build_world("office")
+    # World poses can be drawn on it: starts fall on free cells, wall points on occupied ones.
+    starts = grid.world_to_cell(world.starts[:, :2])
+    assert (grid.cells[starts[:, 0], starts[:, 1]] == FREE).all()
+    wall_centres = grid.world_to_cell(world.walls.mean(axis=1))
+    assert (grid.cells[wall_centres[:, 0], wall_centres[:, 1]] == OCCUPIED).all()
+
+
+def test_run_writes_report_and_recording(capsys, tmp_path) -> None:
+    status, out, _ = run_cli(
+        capsys, "run", "--max-steps", "60", "--out", str(tmp_path), "--name", "t", "--json",
+    )
+    assert status == 0
+    report = json.loads(out)
+    assert report == json.loads((tmp_path / "t" / "report.json").read_text())
+    assert report["scenario"] == "office" and report["steps"] == 60
+    assert report["sim_time"] == pytest.approx(6.0)
+    for robot in ("robot_0", "robot_1"):
+        assert 0.0 < report["robots"][robot]["coverage"] <= 1.0
+        assert report["robots"][robot]["distance"] > 1.0  # the wanderer moves
+    entities = {chunk.entity_path for chunk in RrdReader(tmp_path / "t" / "recording.rrd").stream()}
+    for path in ("/world/ground_truth", "/world/robot_0/true_pose", "/world/robot_1/scan", "/events"):
+        assert path in entities
+
+
+def test_run_from_a_map_file(capsys, tmp_path) -> None:
+    assert run_cli(capsys, "scenarios", "--export", "maze", str(tmp_path / "m.yaml"))[0] == 0
+    status, out, _ = run_cli(
+        capsys, "run", "--map", str(tmp_path / "m.yaml"), "--max-steps", "20",
+        "--out", str(tmp_path), "--no-record", "--json",
+    )
+    assert status == 0
+    assert json.loads(out)["scenario"] == "map:m.yaml"
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["run", "--scenario", "nowhere", "--no-record"], "unknown scenario 'nowhere'; valid"),
+        (["run", "--map", "missing.yaml", "--no-record"], "missing.yaml"),
+        (["run", "--max-steps", "0", "--no-record"], "max_steps must be >= 1"),
+        (["scenarios", "--export", "nowhere", "x.yaml"], "unknown scenario"),
+        (["scenarios", "--export", "office", "x.yaml", "--resolution", "-1"], "resolution"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(capsys, tmp_path, monkeypatch, argv, message) -> None:
+    monkeypatch.chdir(tmp_path)
+    status, out, err = run_cli(capsys, *argv)
+    assert status == 2
+    assert err.count("\n") == 1 and err.startswith("mrslam: error: ")
+    assert message in err
+
+
+def test_malformed_map_file(capsys, tmp_path) -> None:
+    (tmp_path / "bad.yaml").write_text("image: [unclosed\n")
+    status, _, err = run_cli(capsys, "run", "--map", str(tmp_path / "bad.yaml"), "--no-record")
+    assert status == 2 and err.count("\n") == 1 and "bad.yaml" in err
+
+
+def test_bench_sim_json_rows(capsys) -> None:
+    status, out, _ = run_cli(
+        capsys, "bench", "sim", "--scenarios", "maze", "--steps", "30", "--repeats", "1", "--json"
+    )
+    assert status == 0
+    (row,) = json.loads(out)
+    assert set(row) == {"scenario", "slam", "mrslam_steps_per_s", "irsim_steps_per_s"}
+    assert row["scenario"] == "maze" and row["slam"] is False
+    assert np.isfinite(row["mrslam_steps_per_s"]) and row["mrslam_steps_per_s"] > 0
+    assert np.isfinite(row["irsim_steps_per_s"]) and row["irsim_steps_per_s"] > 0
+
+
+def test_console_script_is_installed(tmp_path: Path) -> None:
+    # The script sits beside the interpreter running the tests (a venv's bin folder).
+    beside = Path(sys.executable).parent / "mrslam"
+    executable = str(beside) if beside.exists() else shutil.which("mrslam")
+    assert executable is not None
+    done = subprocess.run([executable, "run", "--scenario", "x"], capture_output=True, text=True)
+    assert done.returncode == 2
+    assert done.stderr.startswith("mrslam: error: unknown scenario 'x'")

@@ -1,0 +1,66 @@
+"""The dependency rules of DESIGN §1, checked in fresh interpreters."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def modules_loaded_by(statement: str) -> set[str]:
+    code = f"import sys; {statement}; print('\\n'.join(sorted(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return {line.split(".")[0] for line in out.stdout.split()} | set(out.stdout.split())
+
+
+@pytest.mark.parametrize(
+    "statement",
+    [
+        "import mrslam_env",
+        "import mrslam_env.merge",
+        "import mrslam_env.geometry, mrslam_env.gridmap, mrslam_env.mapio",
+        "import mrslam_env.slam.raycast",
+        "import mrslam_env.sim.world",
+    ],
+)
+def test_light_imports(statement: str) -> None:
+    loaded = modules_loaded_by(statement)
+    for heavy in ("pymunk", "pettingzoo", "rerun", "agents", "scenarios"):
+        assert heavy not in loaded, f"`{statement}` imports {heavy}"
+
+
+def imports_of(package: str) -> dict[str, set[str]]:
+    """Top-level module names each file of a package imports (statically)."""
+    found = {}
+    for path in (ROOT / package).rglob("*.py"):
+        names: set[str] = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                names |= {alias.name.split(".")[0] for alias in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                names.add(node.module.split(".")[0])
+        found[str(path.relative_to(ROOT))] = names
+    return found
+
+
+def test_library_never_imports_agents_or_scenarios() -> None:
+    for path, names in imports_of("mrslam_env").items():
+        assert not names & {"agents", "scenarios"}, f"{path} imports {names & {'agents', 'scenarios'}}"
+
+
+def test_heavy_libraries_stay_in_their_modules() -> None:
+    homes = {
+        "pymunk": {"mrslam_env/sim/physics.py"},
+        "rerun": {"mrslam_env/recording.py"},
+        "pettingzoo": {"mrslam_env/env.py"},
+    }
+    for package in ("mrslam_env", "agents"):
+        for path, names in imports_of(package).items():
+            for library, allowed in homes.items():
+                if library in names:
+                    assert path in allowed, f"{path} imports {library}"
