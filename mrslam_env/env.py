@@ -65,9 +65,9 @@ seed) or a :class:`~mrslam_env.sim.world.WorldSpec` (e.g. from a ROS map);
 
 Pickling
 --------
-Supported (``pickle``, ``copy.deepcopy``). A restored env continues the same run, except
-that pymunk does not carry cached contact impulses across a pickle: while a robot touches
-a wall, the two runs may differ at the micrometre level.
+Supported (``pickle``, ``copy.deepcopy``): a restored env continues the same run bit for
+bit. (pymunk does not pickle its contact cache, so pickling re-creates the original's
+physics space the same way; the original's next steps are unchanged otherwise.)
 
 Version history
 ---------------

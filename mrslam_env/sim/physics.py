@@ -9,6 +9,7 @@ other robots are resolved by the solver: robots cannot pass through walls or eac
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -73,6 +74,22 @@ class Physics:
         self.space = space
         n = len(self.bodies)
         self.commanded = np.zeros((n, 2))  # the ramped (v, omega) actually applied
+
+    def __getstate__(self) -> dict[str, object]:
+        # pymunk does not pickle its cached contacts (used to warm-start the solver), so a
+        # restored space would drift from this one while robots touch walls. Re-create this
+        # space through the same pickling path first: both then continue bit-identically.
+        self.space, self.bodies, self.controls = copy.deepcopy(
+            (self.space, self.bodies, self.controls)
+        )
+        return {
+            name: getattr(self, name)
+            for name in ("robot", "space", "bodies", "controls", "commanded")
+        }
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        for name, value in state.items():
+            setattr(self, name, value)
 
     @property
     def n_robots(self) -> int:

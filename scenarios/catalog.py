@@ -1,0 +1,97 @@
+"""The scenario catalogue: every built-in world, by name.
+
+The environment finds worlds through the ``mrslam.scenarios`` entry point, which loads
+:data:`SCENARIOS` from here; other packages can register their own mappings of
+:class:`Scenario` under the same entry-point group.
+
+==============  ===========  ====================================================
+name            size (m)     character
+==============  ===========  ====================================================
+``office``      28 x 16      corridor, nine rooms, open-plan area (the default)
+``warehouse``   33 x 20      long parallel shelving aisles: repetitive
+``maze``        21.6 x 16.2  grid maze of 1.8 m cells with a few loops
+``twin_wings``  32 x 14      two identical wings: a trap for map merging
+``procedural``  18-28 sides  seeded office-like floor plans (``build(seed)``)
+==============  ===========  ====================================================
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+
+from mrslam_env.sim.world import WorldSpec
+from scenarios import worlds
+from scenarios.procedural import build_procedural
+
+__all__ = ["DEFAULT_SCENARIO", "SCENARIOS", "Scenario"]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Scenario:
+    """A named world.
+
+    Attributes
+    ----------
+    name : str
+        Key in :data:`SCENARIOS`.
+    description : str
+        One line for ``mrslam scenarios``.
+    build : callable (int) -> WorldSpec
+        Builds the world from a variant/layout seed; hand-made worlds ignore the seed.
+    parametric : bool
+        True when different seeds give different worlds (the procedural family).
+    """
+
+    name: str
+    description: str
+    build: Callable[[int], WorldSpec]
+    parametric: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.name or not self.name.isidentifier():
+            raise ValueError(f"Scenario.name must be an identifier, got {self.name!r}")
+        if not self.description or "\n" in self.description:
+            raise ValueError(f"Scenario.description must be one line, got {self.description!r}")
+        if not callable(self.build):
+            raise TypeError(f"Scenario.build must be callable, got {self.build!r}")
+
+
+DEFAULT_SCENARIO = "office"
+
+SCENARIOS: Mapping[str, Scenario] = MappingProxyType(
+    {
+        scenario.name: scenario
+        for scenario in (
+            Scenario(
+                name="office",
+                description=worlds.OFFICE_DESCRIPTION,
+                build=worlds.build_office,
+            ),
+            Scenario(
+                name="warehouse",
+                description=worlds.WAREHOUSE_DESCRIPTION,
+                build=worlds.build_warehouse,
+            ),
+            Scenario(
+                name="maze",
+                description=worlds.MAZE_DESCRIPTION,
+                build=worlds.build_maze,
+            ),
+            Scenario(
+                name="twin_wings",
+                description=worlds.TWIN_WINGS_DESCRIPTION,
+                build=worlds.build_twin_wings,
+            ),
+            Scenario(
+                name="procedural",
+                description="seeded office-like floor plans: BSP rooms, corridors, doors "
+                "(18-28 m; build(seed))",
+                build=build_procedural,
+                parametric=True,
+            ),
+        )
+    }
+)
+"""Built-in scenarios by name (read-only)."""
