@@ -185,7 +185,7 @@ def test_bad_action_shape_and_missing_agent() -> None:
 
 
 def test_unknown_scenario_lists_the_valid_ones() -> None:
-    with pytest.raises(UnknownScenarioError, match="valid scenarios: .*office"):
+    with pytest.raises(UnknownScenarioError, match=r"valid scenarios: .*office"):
         parallel_env(scenario="ofice")
 
 
