@@ -202,6 +202,8 @@ class EnvConfig:
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"EnvConfig.{name} must be an int >= 1, got {value!r}")
         if self.starts is not None:
+            if len(self.starts) == 0:
+                raise ValueError("EnvConfig.starts must hold at least one pose, or be None")
             for i, start in enumerate(self.starts):
                 if len(start) != 3 or not all(math.isfinite(v) for v in start):
                     raise ValueError(

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["beam_angles", "cast_scan", "line_of_sight"]
+__all__ = ["beam_angles", "cast_scan", "line_of_sight", "nearest_segment", "segments_within"]
 
 _TWO_PI = 2.0 * math.pi
 _EPS = 1e-9
@@ -154,3 +154,34 @@ def line_of_sight(x0: float, y0: float, x1: float, y1: float, segments: FloatArr
         if 0.0 < t < 1.0 and 0.0 <= s <= 1.0:
             return False
     return True
+
+
+@numba.njit(cache=True)
+def nearest_segment(x: float, y: float, segments: FloatArray) -> tuple[float, float, float]:
+    """Distance (m) from (x, y) to the nearest segment, and the unit vector pointing from
+    that segment's closest point towards (x, y). ``(inf, 0, 0)`` when there are none."""
+    best, best_nx, best_ny = math.inf, 0.0, 0.0
+    for m in range(segments.shape[0]):
+        ax, ay, bx, by = segments[m, 0], segments[m, 1], segments[m, 2], segments[m, 3]
+        ex, ey = bx - ax, by - ay
+        length2 = ex * ex + ey * ey
+        t = 0.0
+        if length2 > 0.0:
+            t = min(max(((x - ax) * ex + (y - ay) * ey) / length2, 0.0), 1.0)
+        dx, dy = x - (ax + t * ex), y - (ay + t * ey)
+        d = math.sqrt(dx * dx + dy * dy)
+        if d < best:
+            best = d
+            if d > 0.0:
+                best_nx, best_ny = dx / d, dy / d
+    return best, best_nx, best_ny
+
+
+@numba.njit(cache=True)
+def segments_within(x: float, y: float, reach: float, segments: FloatArray) -> FloatArray:
+    """The segments (K, 4) that come within ``reach`` metres of (x, y)."""
+    keep = np.zeros(segments.shape[0], dtype=np.bool_)
+    for m in range(segments.shape[0]):
+        s = segments[m]
+        keep[m] = _segment_point_distance(x, y, s[0], s[1], s[2], s[3]) <= reach
+    return segments[keep]

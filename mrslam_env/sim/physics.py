@@ -18,12 +18,15 @@ from numpy.typing import NDArray
 
 from mrslam_env.config import RobotConfig
 from mrslam_env.geometry import wrap_scalar
+from mrslam_env.sim.lidar import nearest_segment, segments_within
 from mrslam_env.sim.world import WorldSpec
 
 __all__ = ["Physics"]
 
 WALL = 1
 ROBOT = 2
+NEW_CONTACT_OVERLAP = 0.002  # m: the most a robot may overlap a wall or robot on impact
+MAX_SUBSTEPS = 100  # per env step, bounding the cost of conservative advancement
 
 
 class Physics:
@@ -72,8 +75,10 @@ class Physics:
             self.bodies.append(body)
             self.controls.append(control)
         self.space = space
-        n = len(self.bodies)
-        self.commanded = np.zeros((n, 2))  # the ramped (v, omega) actually applied
+        self.segments = world.segments
+        self.commanded = [[0.0, 0.0] for _ in self.bodies]  # ramped (v, omega) per robot
+        self._last_h = 0.0  # length of the last substep run, s (0: none yet)
+        self._impact = False  # whether the last substep made a new contact
 
     def __getstate__(self) -> dict[str, object]:
         # pymunk does not pickle its cached contacts (used to warm-start the solver), so a
@@ -82,10 +87,17 @@ class Physics:
         self.space, self.bodies, self.controls = copy.deepcopy(
             (self.space, self.bodies, self.controls)
         )
-        return {
-            name: getattr(self, name)
-            for name in ("robot", "space", "bodies", "controls", "commanded")
-        }
+        names = (
+            "robot",
+            "space",
+            "bodies",
+            "controls",
+            "segments",
+            "commanded",
+            "_last_h",
+            "_impact",
+        )
+        return {name: getattr(self, name) for name in names}
 
     def __setstate__(self, state: dict[str, object]) -> None:
         for name, value in state.items():
@@ -105,6 +117,13 @@ class Physics:
     def step(self, targets: NDArray[np.float64], dt: float, substeps: int) -> NDArray[np.bool_]:
         """Advance ``dt`` seconds driving towards target velocities.
 
+        pymunk finds a contact only once shapes overlap, so a plain fixed step would let a
+        fast robot sink up to one step of travel into a wall before being pushed out. Each
+        substep is therefore cut short (conservative advancement) so that no robot closes a
+        gap to a wall or another robot by more than the gap plus ``NEW_CONTACT_OVERLAP``: a
+        new contact starts with at most that overlap, and the solver takes it from there.
+        In open space the step is split into ``substeps`` equal parts.
+
         Parameters
         ----------
         targets : ndarray, shape (n, 2)
@@ -112,38 +131,102 @@ class Physics:
         dt : float
             Duration, s.
         substeps : int
-            Physics steps to split ``dt`` into.
+            Physics steps to split ``dt`` into when nothing is near.
 
         Returns
         -------
         ndarray of bool, shape (n,)
             Whether each robot touched a wall or another robot during the step.
         """
-        h = dt / substeps
-        dv = self.robot.max_acceleration * h
-        dw = self.robot.max_angular_acceleration * h
-        collided = [False] * self.n_robots
-        commanded = self.commanded.tolist()
         goals = np.asarray(targets, dtype=np.float64).tolist()
-        robots = list(zip(self.bodies, self.controls, strict=True))
-        for _ in range(substeps):
-            for i, (body, control) in enumerate(robots):
-                v, w = commanded[i]
-                v += min(max(goals[i][0] - v, -dv), dv)
-                w += min(max(goals[i][1] - w, -dw), dw)
-                commanded[i] = [v, w]
-                angle = body.angle
-                control.velocity = (v * math.cos(angle), v * math.sin(angle))
-                control.angular_velocity = w
+        collided = [False] * self.n_robots
+        longest, shortest = dt / substeps, dt / MAX_SUBSTEPS
+        # Only walls and robots within two steps of travel can be met during this step.
+        reach = self.robot.radius + 2.0 * max(self.robot.max_speed, 1e-9) * dt
+        positions = self._positions()
+        nearby = [segments_within(x, y, reach, self.segments) for x, y in positions]
+        crowded = any(len(segments) for segments in nearby) or any(
+            math.hypot(xi - xj, yi - yj) < 2.0 * reach
+            for k, (xi, yi) in enumerate(positions)
+            for xj, yj in positions[k + 1 :]
+        )
+        h = self._last_h or longest  # length of the last substep run
+        remaining = dt
+        while remaining > 1e-12:
+            target = min(longest, self._safe_duration(goals, nearby)) if crowded else longest
+            # Shrink at once; grow (at most twice as long) only after a substep without a
+            # new contact: pymunk warm-starts with the last impulses scaled by the ratio of
+            # step lengths, which would multiply an impact impulse into a kick.
+            if target <= h:
+                h = target
+            elif not self._impact:
+                h = min(2.0 * h, target)
+            h = min(max(h, shortest), remaining)
+            self._drive(goals, h)
             self.space.step(h)
-            for i, (body, _control) in enumerate(robots):
-                if not collided[i]:
-                    collided[i] = _touching(body)
-        self.commanded = np.array(commanded)
+            remaining -= h
+            self._impact = False
+            for i, body in enumerate(self.bodies):
+                touching, first = _contacts(body)
+                collided[i] = collided[i] or touching
+                self._impact = self._impact or first
+        self._last_h = h
         return np.array(collided, dtype=bool)
 
+    def _positions(self) -> list[tuple[float, float]]:
+        return [(float(b.position.x), float(b.position.y)) for b in self.bodies]
 
-def _touching(body: pymunk.Body) -> bool:
-    contacts: list[bool] = []
-    body.each_arbiter(lambda arbiter: contacts.append(True))
-    return bool(contacts)
+    def _drive(self, goals: list[list[float]], h: float) -> None:
+        """Move each commanded velocity towards its target within the acceleration limits
+        and set the control body to it, along the robot's current heading.
+
+        The ramp acts on the command, like a motor controller's: a robot stalled against a
+        wall keeps its forward command until the new target has ramped past it."""
+        dv = self.robot.max_acceleration * h
+        dw = self.robot.max_angular_acceleration * h
+        for i, (body, control) in enumerate(zip(self.bodies, self.controls, strict=True)):
+            v, w = self.commanded[i]
+            v += min(max(goals[i][0] - v, -dv), dv)
+            w += min(max(goals[i][1] - w, -dw), dw)
+            self.commanded[i] = [v, w]
+            c, s = math.cos(body.angle), math.sin(body.angle)
+            control.velocity = (v * c, v * s)
+            control.angular_velocity = w
+
+    def _safe_duration(self, goals: list[list[float]], nearby: list[NDArray[np.float64]]) -> float:
+        """Longest substep (s) in which no gap to a wall or robot closes by more than the
+        gap plus ``NEW_CONTACT_OVERLAP``; touching pairs (gap <= 0) are the solver's."""
+        radius = self.robot.radius
+        safe = math.inf
+        speeds = []
+        positions = self._positions()
+        for body, (v_goal, _), (x, y), segments in zip(
+            self.bodies, goals, positions, nearby, strict=True
+        ):
+            # Bound the speed over the substep by what the robot has and what it may reach.
+            speed = max(abs(body.velocity), abs(v_goal), 1e-9)
+            speeds.append(speed)
+            gap = nearest_segment(x, y, segments)[0] - radius
+            if gap > 0.0:
+                safe = min(safe, (gap + NEW_CONTACT_OVERLAP) / speed)
+        for i in range(self.n_robots):
+            for j in range(i + 1, self.n_robots):
+                (xi, yi), (xj, yj) = positions[i], positions[j]
+                gap = math.hypot(xj - xi, yj - yi) - 2.0 * radius
+                if gap > 0.0:
+                    safe = min(safe, (gap + NEW_CONTACT_OVERLAP) / (speeds[i] + speeds[j]))
+        return safe
+
+
+def _contacts(body: pymunk.Body) -> tuple[bool, bool]:
+    """Whether the body touches anything, and whether any of the contacts is new."""
+    touching: list[bool] = []
+    first: list[bool] = []
+
+    def visit(arbiter: pymunk.Arbiter) -> None:
+        touching.append(True)
+        if arbiter.is_first_contact:
+            first.append(True)
+
+    body.each_arbiter(visit)
+    return bool(touching), bool(first)

@@ -7,11 +7,13 @@ draws a fixed number of variates per call, whatever the scene, so that the rando
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
 from mrslam_env.config import LidarConfig, OdometryConfig, PeerSensorConfig
-from mrslam_env.geometry import wrap_angle
+from mrslam_env.geometry import wrap_scalar
 
 FloatArray = NDArray[np.float64]
 
@@ -31,18 +33,17 @@ def odometry_increments(before: FloatArray, after: FloatArray) -> FloatArray:
     translation (and rotations near zero) rather than a half-turn, so that reversing
     robots do not get heading noise proportional to pi.
     """
-    before = np.atleast_2d(before)
-    after = np.atleast_2d(after)
-    delta = after[:, :2] - before[:, :2]
-    trans = np.hypot(delta[:, 0], delta[:, 1])
-    rot1 = np.where(
-        trans < 1e-9, 0.0, wrap_angle(np.arctan2(delta[:, 1], delta[:, 0]) - before[:, 2])
-    )
-    backward = np.abs(rot1) > np.pi / 2.0
-    rot1 = np.where(backward, wrap_angle(rot1 - np.pi), rot1)
-    trans = np.where(backward, -trans, trans)
-    rot2 = wrap_angle(after[:, 2] - before[:, 2] - rot1)
-    return np.column_stack([rot1, trans, rot2])
+    before, after = np.atleast_2d(before), np.atleast_2d(after)
+    out = np.empty((len(before), 3))
+    for i, ((x0, y0, theta0), (x1, y1, theta1)) in enumerate(
+        zip(before.tolist(), after.tolist(), strict=True)
+    ):
+        trans = math.hypot(x1 - x0, y1 - y0)
+        rot1 = 0.0 if trans < 1e-9 else wrap_scalar(math.atan2(y1 - y0, x1 - x0) - theta0)
+        if abs(rot1) > math.pi / 2.0:
+            rot1, trans = wrap_scalar(rot1 - math.pi), -trans
+        out[i] = (rot1, trans, wrap_scalar(theta1 - theta0 - rot1))
+    return out
 
 
 def sample_odometry_increments(
@@ -66,14 +67,18 @@ def sample_odometry_increments(
 
 def apply_odometry_increments(poses: FloatArray, increments: FloatArray) -> FloatArray:
     """Move poses (n, 3) by increments ``(rot1, trans, rot2)`` (n, 3)."""
-    heading = poses[:, 2] + increments[:, 0]
-    return np.column_stack(
-        [
-            poses[:, 0] + increments[:, 1] * np.cos(heading),
-            poses[:, 1] + increments[:, 1] * np.sin(heading),
-            wrap_angle(heading + increments[:, 2]),
-        ]
-    )
+    poses, increments = np.atleast_2d(poses), np.atleast_2d(increments)
+    out = np.empty((len(poses), 3))
+    for i, ((x, y, theta), (rot1, trans, rot2)) in enumerate(
+        zip(poses.tolist(), increments.tolist(), strict=True)
+    ):
+        heading = theta + rot1
+        out[i] = (
+            x + trans * math.cos(heading),
+            y + trans * math.sin(heading),
+            wrap_scalar(heading + rot2),
+        )
+    return out
 
 
 def add_lidar_noise(
@@ -109,17 +114,20 @@ def peer_measurements(
         ``theta_j - theta_i``; the diagonal is meaningless. Whether j is detectable at all
         (range, line of sight) is for the caller to decide.
     """
-    delta = poses[None, :, :2] - poses[:, None, :2]
-    noise = rng.standard_normal((len(poses), len(poses), 3)) * (
+    n = len(poses)
+    noise = rng.standard_normal((n, n, 3)) * (
         config.range_noise_std,
         config.bearing_noise_std,
         config.heading_noise_std,
     )
-    distance = np.clip(
-        np.hypot(delta[..., 0], delta[..., 1]) + noise[..., 0], 0.0, config.detect_range
-    )
-    bearing = wrap_angle(
-        np.arctan2(delta[..., 1], delta[..., 0]) - poses[:, None, 2] + noise[..., 1]
-    )
-    heading = wrap_angle(poses[None, :, 2] - poses[:, None, 2] + noise[..., 2])
-    return np.stack([distance, bearing, heading], axis=-1)
+    out = np.zeros((n, n, 3))
+    rows = poses.tolist()
+    for i, (xi, yi, ti) in enumerate(rows):
+        for j, (xj, yj, tj) in enumerate(rows):
+            if i == j:
+                continue
+            e_range, e_bearing, e_heading = noise[i, j]
+            distance = min(max(math.hypot(xj - xi, yj - yi) + e_range, 0.0), config.detect_range)
+            bearing = wrap_scalar(math.atan2(yj - yi, xj - xi) - ti + e_bearing)
+            out[i, j] = (distance, bearing, wrap_scalar(tj - ti + e_heading))
+    return out

@@ -71,13 +71,15 @@ def choose_starts(
 ) -> FloatArray:
     """Start poses (n, 3): the given ones (validated), then automatic ones.
 
-    Automatic starts lie in free space connected to the first start, with at least
-    ``radius + 0.3`` m clearance, at least 2 m from other robots, any heading.
+    Automatic starts lie where the robot fits, connected (for the robot, not just
+    through free cells) to the first start, with at least ``radius + 0.3`` m clearance, at
+    least 2 m from other robots, any heading.
 
     Raises
     ------
     ValueError
-        If a given start lies inside a wall or closer than the robot radius to one.
+        If a given start lies inside a wall or closer than the robot radius to one, or two
+        given starts overlap, or there is no room for the automatic ones.
     """
     given = world.starts if given is None else np.asarray(given, dtype=np.float64).reshape(-1, 3)
     starts = [np.asarray(s, dtype=np.float64) for s in given[:n_robots]]
@@ -89,14 +91,21 @@ def choose_starts(
                 f"start pose {i} ({start[0]:.2f}, {start[1]:.2f}, {start[2]:.2f}) is {where}; "
                 f"a robot of radius {radius} m needs {radius + START_CLEARANCE_MARGIN:.2f} m"
             )
+        for j in range(i):
+            if math.hypot(*(start[:2] - starts[j][:2])) < 2.0 * radius + START_CLEARANCE_MARGIN:
+                raise ValueError(
+                    f"start pose {i} ({start[0]:.2f}, {start[1]:.2f}) overlaps start pose {j} "
+                    f"({starts[j][0]:.2f}, {starts[j][1]:.2f})"
+                )
     if len(starts) < n_robots:
         resolution = 0.1
         grid = ground_truth_map(world, resolution, margin=resolution)
-        free = grid.free
-        labels, _ = ndimage.label(free)
+        # Cell-centre distance to the nearest occupied cell centre, less half a cell: a
+        # lower bound of the true clearance. Regions are linked only where the robot fits.
+        distance = (ndimage.distance_transform_edt(grid.free) - 0.5) * resolution
+        labels, _ = ndimage.label(distance >= radius)
         iy, ix = grid.world_to_cell(starts[0][:2])
         component = labels == labels[iy, ix]
-        distance = ndimage.distance_transform_edt(free) * resolution
         candidates = np.argwhere(component & (distance >= radius + 0.3))
         order = rng.permutation(len(candidates))
         for index in order:

@@ -82,7 +82,8 @@ def _ccw_convex(quads: FloatArray) -> FloatArray:
     edges = np.roll(quads, -1, axis=1) - quads
     following = np.roll(edges, -1, axis=1)
     cross = edges[..., 0] * following[..., 1] - edges[..., 1] * following[..., 0]
-    bad = (np.abs(area2) < 1e-12) | np.any(cross < -1e-12, axis=1)
+    short_edge = np.any(np.hypot(edges[..., 0], edges[..., 1]) < 1e-9, axis=1)
+    bad = (np.abs(area2) < 1e-12) | np.any(cross < -1e-12, axis=1) | short_edge
     if bad.any():
         index = int(np.argmax(bad))
         raise ValueError(
