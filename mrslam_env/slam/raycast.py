@@ -17,6 +17,37 @@ __all__ = ["mark_scan_observed", "traverse"]
 
 
 @numba.njit(cache=True)
+def _dda_start(
+    x0: float, y0: float, x1: float, y1: float, origin_x: float, origin_y: float, resolution: float
+) -> tuple[int, int, int, int, float, float, float, float, int]:
+    """Amanatides–Woo initial state for the segment (x0, y0)–(x1, y1): start cell
+    ``(ix, iy)``, steps, parametric distances to the first cell borders and between borders
+    (in units of the whole segment), and the number of cell steps to the end cell."""
+    gx0, gy0 = (x0 - origin_x) / resolution, (y0 - origin_y) / resolution
+    gx1, gy1 = (x1 - origin_x) / resolution, (y1 - origin_y) / resolution
+    ix, iy = math.floor(gx0), math.floor(gy0)
+    dx, dy = gx1 - gx0, gy1 - gy0
+    step_x = 1 if dx > 0 else -1
+    step_y = 1 if dy > 0 else -1
+    t_delta_x = abs(1.0 / dx) if dx != 0.0 else math.inf
+    t_delta_y = abs(1.0 / dy) if dy != 0.0 else math.inf
+    if dx > 0:
+        t_max_x = (ix + 1 - gx0) / dx
+    elif dx < 0:
+        t_max_x = (gx0 - ix) / -dx
+    else:
+        t_max_x = math.inf
+    if dy > 0:
+        t_max_y = (iy + 1 - gy0) / dy
+    elif dy < 0:
+        t_max_y = (gy0 - iy) / -dy
+    else:
+        t_max_y = math.inf
+    n_steps = abs(math.floor(gx1) - ix) + abs(math.floor(gy1) - iy)
+    return ix, iy, step_x, step_y, t_max_x, t_max_y, t_delta_x, t_delta_y, n_steps
+
+
+@numba.njit(cache=True)
 def traverse(
     x0: float,
     y0: float,
@@ -36,36 +67,17 @@ def traverse(
     origin_x, origin_y, resolution : float
         Grid placement.
     cells : ndarray, shape (capacity, 2), int64
-        Output buffer for ``(iy, ix)``; needs ``capacity >= |dx|/res + |dy|/res + 2``.
+        Output buffer for ``(iy, ix)``; needs
+        ``capacity >= floor(|dx| / res) + floor(|dy| / res) + 3`` (dx, dy in metres).
 
     Returns
     -------
     int
         Number of cells written; they are not clipped to any grid bounds.
     """
-    gx0, gy0 = (x0 - origin_x) / resolution, (y0 - origin_y) / resolution
-    gx1, gy1 = (x1 - origin_x) / resolution, (y1 - origin_y) / resolution
-    ix, iy = math.floor(gx0), math.floor(gy0)
-    ix_end, iy_end = math.floor(gx1), math.floor(gy1)
-    dx, dy = gx1 - gx0, gy1 - gy0
-    step_x = 1 if dx > 0 else -1
-    step_y = 1 if dy > 0 else -1
-    inf = math.inf
-    t_delta_x = abs(1.0 / dx) if dx != 0.0 else inf
-    t_delta_y = abs(1.0 / dy) if dy != 0.0 else inf
-    if dx > 0:
-        t_max_x = (ix + 1 - gx0) / dx
-    elif dx < 0:
-        t_max_x = (gx0 - ix) / -dx
-    else:
-        t_max_x = inf
-    if dy > 0:
-        t_max_y = (iy + 1 - gy0) / dy
-    elif dy < 0:
-        t_max_y = (gy0 - iy) / -dy
-    else:
-        t_max_y = inf
-    n_steps = abs(ix_end - ix) + abs(iy_end - iy)
+    ix, iy, step_x, step_y, t_max_x, t_max_y, t_delta_x, t_delta_y, n_steps = _dda_start(
+        x0, y0, x1, y1, origin_x, origin_y, resolution
+    )
     count = 0
     cells[count, 0], cells[count, 1] = iy, ix
     count += 1
@@ -95,27 +107,9 @@ def _mark_segment(
     """:func:`traverse` fused with marking, for speed: marks in-grid cells on the segment,
     returns how many were unmarked before."""
     rows, cols = observed.shape
-    gx0, gy0 = (x0 - origin_x) / resolution, (y0 - origin_y) / resolution
-    gx1, gy1 = (x1 - origin_x) / resolution, (y1 - origin_y) / resolution
-    ix, iy = math.floor(gx0), math.floor(gy0)
-    dx, dy = gx1 - gx0, gy1 - gy0
-    step_x = 1 if dx > 0 else -1
-    step_y = 1 if dy > 0 else -1
-    t_delta_x = abs(1.0 / dx) if dx != 0.0 else math.inf
-    t_delta_y = abs(1.0 / dy) if dy != 0.0 else math.inf
-    if dx > 0:
-        t_max_x = (ix + 1 - gx0) / dx
-    elif dx < 0:
-        t_max_x = (gx0 - ix) / -dx
-    else:
-        t_max_x = math.inf
-    if dy > 0:
-        t_max_y = (iy + 1 - gy0) / dy
-    elif dy < 0:
-        t_max_y = (gy0 - iy) / -dy
-    else:
-        t_max_y = math.inf
-    n_steps = abs(math.floor(gx1) - ix) + abs(math.floor(gy1) - iy)
+    ix, iy, step_x, step_y, t_max_x, t_max_y, t_delta_x, t_delta_y, n_steps = _dda_start(
+        x0, y0, x1, y1, origin_x, origin_y, resolution
+    )
     newly = 0
     for k in range(n_steps + 1):
         if k > 0:
