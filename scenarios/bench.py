@@ -62,6 +62,10 @@ def env_steps_per_second(
     config = replace(config, max_cycles=n_steps + 1)
     env = MultiRobotSlamEnv(scenario=world, seed=0, config=config)
     commands = driving_commands(n_steps, len(env.possible_agents))
+    # An untimed warm-up: loads the compiled numba kernels and warms the caches.
+    env.reset(seed=repeats)
+    for k in range(min(n_steps, 100)):
+        env.step({agent: commands[k, i] for i, agent in enumerate(env.possible_agents)})
     rates = []
     for repeat in range(repeats):
         env.reset(seed=repeat)
