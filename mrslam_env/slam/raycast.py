@@ -13,11 +13,11 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["mark_scan_observed", "traverse"]
+__all__ = ["dda_start", "mark_scan_observed", "traverse"]
 
 
 @numba.njit(cache=True)
-def _dda_start(
+def dda_start(
     x0: float, y0: float, x1: float, y1: float, origin_x: float, origin_y: float, resolution: float
 ) -> tuple[int, int, int, int, float, float, float, float, int]:
     """Amanatides–Woo initial state for the segment (x0, y0)–(x1, y1): start cell
@@ -75,7 +75,7 @@ def traverse(
     int
         Number of cells written; they are not clipped to any grid bounds.
     """
-    ix, iy, step_x, step_y, t_max_x, t_max_y, t_delta_x, t_delta_y, n_steps = _dda_start(
+    ix, iy, step_x, step_y, t_max_x, t_max_y, t_delta_x, t_delta_y, n_steps = dda_start(
         x0, y0, x1, y1, origin_x, origin_y, resolution
     )
     count = 0
@@ -107,7 +107,7 @@ def _mark_segment(
     """:func:`traverse` fused with marking, for speed: marks in-grid cells on the segment,
     returns how many were unmarked before."""
     rows, cols = observed.shape
-    ix, iy, step_x, step_y, t_max_x, t_max_y, t_delta_x, t_delta_y, n_steps = _dda_start(
+    ix, iy, step_x, step_y, t_max_x, t_max_y, t_delta_x, t_delta_y, n_steps = dda_start(
         x0, y0, x1, y1, origin_x, origin_y, resolution
     )
     newly = 0

@@ -1,0 +1,255 @@
+"""Configuration of the onboard SLAM: frozen dataclasses, unit and meaning per field.
+
+Three layers, as in :mod:`mrslam_env.config`: :class:`GridConfig` (the occupancy grid and
+its log-odds update), :class:`MatcherConfig` (scan-to-map matching) and :class:`SlamConfig`
+(mode, motion filter, and the two above). Change a value with :func:`dataclasses.replace`,
+e.g. ``replace(SlamConfig(), mode="odometry")``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal, get_args
+
+__all__ = ["SLAM_MODES", "GridConfig", "MatcherConfig", "SlamConfig", "SlamMode"]
+
+SlamMode = Literal["slam", "odometry", "ground_truth"]
+SLAM_MODES: tuple[str, ...] = get_args(SlamMode)
+
+
+def _require(cls_name: str, name: str, value: object, ok: bool, wanted: str) -> None:
+    if not ok:
+        raise ValueError(f"{cls_name}.{name} must be {wanted}, got {value!r}")
+
+
+def _positive(obj: object, *names: str) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        ok = isinstance(value, int | float) and math.isfinite(value) and value > 0
+        _require(type(obj).__name__, name, value, ok, "a finite number > 0")
+
+
+def _non_negative(obj: object, *names: str) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        ok = isinstance(value, int | float) and math.isfinite(value) and value >= 0
+        _require(type(obj).__name__, name, value, ok, "a finite number >= 0")
+
+
+def _positive_int(obj: object, *names: str) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        ok = isinstance(value, int) and not isinstance(value, bool) and value >= 1
+        _require(type(obj).__name__, name, value, ok, "an int >= 1")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class GridConfig:
+    """The growing log-odds occupancy grid and how a scan updates it.
+
+    The grid also keeps the matcher's two likelihood fields (Gaussian blurs of the
+    occupied cells) current, so their widths live here.
+    """
+
+    resolution: float = 0.05
+    """Cell edge length, m."""
+    log_odds_hit: float = 0.85
+    """Log-odds added to the cell a beam ends in (> 0)."""
+    log_odds_miss: float = -0.4
+    """Log-odds added to every cell a beam passes before its end (< 0)."""
+    log_odds_min: float = -2.0
+    """Lower clamp of a cell's log-odds (< 0): bounds how long a free cell takes to turn."""
+    log_odds_max: float = 3.5
+    """Upper clamp of a cell's log-odds (> 0)."""
+    occupied_threshold: float = 0.5
+    """A cell is OCCUPIED when its log-odds exceed this (>= 0); such cells feed the
+    likelihood fields."""
+    free_threshold: float = -0.5
+    """A cell is FREE when its log-odds are below this (<= 0); in between, UNKNOWN."""
+    no_return_clear_distance: float = 3.0
+    """How far a beam with no return (range == max range) clears free space, m; 0 turns
+    it off. Clearing stops at the first cell already OCCUPIED (a dropout in front of a
+    known wall must not erase it)."""
+    min_range: float = 0.05
+    """Returns shorter than this are ignored, m."""
+    growth_chunk: int = 64
+    """The grid grows by whole multiples of this many cells per side."""
+    fine_sigma: float = 0.05
+    """Standard deviation of the fine likelihood field's Gaussian blur, m."""
+    coarse_sigma: float = 0.12
+    """Standard deviation of the coarse likelihood field's Gaussian blur, m."""
+
+    def __post_init__(self) -> None:
+        name = type(self).__name__
+        _positive(self, "resolution", "log_odds_hit", "log_odds_max", "fine_sigma", "coarse_sigma")
+        _non_negative(self, "occupied_threshold", "no_return_clear_distance", "min_range")
+        for attr in ("log_odds_miss", "log_odds_min"):
+            value = getattr(self, attr)
+            _require(name, attr, value, math.isfinite(value) and value < 0, "a finite number < 0")
+        value = self.free_threshold
+        _require(name, "free_threshold", value, math.isfinite(value) and value <= 0, "<= 0")
+        _require(
+            name,
+            "occupied_threshold",
+            self.occupied_threshold,
+            self.occupied_threshold < self.log_odds_max,
+            f"< log_odds_max ({self.log_odds_max})",
+        )
+        _require(
+            name,
+            "free_threshold",
+            self.free_threshold,
+            self.free_threshold > self.log_odds_min,
+            f"> log_odds_min ({self.log_odds_min})",
+        )
+        _positive_int(self, "growth_chunk")
+        _require(
+            name,
+            "growth_chunk",
+            self.growth_chunk,
+            self.growth_chunk % 2 == 0,
+            "even",
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MatcherConfig:
+    """Scan-to-map matching: correlative search, Gauss–Newton refinement, acceptance.
+
+    The search window grows with the odometry motion since the last matched scan:
+    ``angle_window = angle_window_base + angle_window_per_rad * |dtheta| +
+    angle_window_per_m * distance`` (capped at ``angle_window_max``), likewise for x, y.
+    The defaults cover the simulator's four-alpha odometry noise: turning on the spot its
+    heading error can approach the whole turn. The same motion sets the odometry prior's
+    standard deviations (``prior_*``).
+    """
+
+    coarse_angle_step: float = math.radians(1.0)
+    """Heading step of the coarse search, rad."""
+    fine_angle_step: float = math.radians(0.25)
+    """Heading step of the fine search, rad."""
+    coarse_xy_step: float = 0.10
+    """Translation step of the coarse search, m (rounded to whole cells)."""
+    angle_window_base: float = 0.1
+    """Half-width of the heading window with no motion, rad."""
+    angle_window_per_rad: float = 1.2
+    """Heading window growth per radian turned, rad/rad."""
+    angle_window_per_m: float = 0.5
+    """Heading window growth per metre driven, rad/m."""
+    angle_window_max: float = 0.45
+    """Cap on the heading half-window, rad."""
+    xy_window_base: float = 0.05
+    """Half-width of the x and y windows with no motion, m."""
+    xy_window_per_m: float = 0.4
+    """x, y window growth per metre driven, m/m."""
+    xy_window_per_rad: float = 0.1
+    """x, y window growth per radian turned, m/rad."""
+    xy_window_max: float = 0.4
+    """Cap on the x, y half-window, m."""
+    fine_search_cells: int = 1
+    """Half-width of the fine search in cells around the coarse winner (0: no fine search,
+    the refinement starts from the coarse winner)."""
+    coarse_point_stride: int = 2
+    """The coarse search uses every this-many-th scan point."""
+    refine_iterations: int = 8
+    """Maximum Gauss–Newton iterations."""
+    residual_std: float = 0.02
+    """Standard deviation of a scan point's distance to the mapped wall, m (range noise
+    plus map error); weighs the match against the odometry prior in the refinement."""
+    prior_xy_std_base: float = 0.02
+    """Odometry prior std on x, y with no motion, m."""
+    prior_xy_std_per_m: float = 0.2
+    """Odometry prior std growth per metre driven, m/m."""
+    prior_angle_std_base: float = 0.02
+    """Odometry prior std on heading with no motion, rad."""
+    prior_angle_std_per_rad: float = 0.3
+    """Odometry prior std growth per radian turned, rad/rad."""
+    prior_weight: float = 0.002
+    """Weight of the odometry prior in the correlative search score (per point and per
+    unit squared Mahalanobis distance): breaks ties towards the prediction."""
+    min_points: int = 40
+    """Fewer scan returns than this: fall back to odometry."""
+    min_score: float = 0.35
+    """Mean likelihood (0..1) of the matched scan below this: fall back to odometry."""
+    degenerate_ratio: float = 0.02
+    """When the smallest / largest eigenvalue of the translational information is below
+    this, the scan does not constrain that direction: the correction along it is
+    dropped (odometry is kept there)."""
+
+    def __post_init__(self) -> None:
+        _positive(
+            self,
+            "coarse_angle_step",
+            "fine_angle_step",
+            "coarse_xy_step",
+            "angle_window_max",
+            "xy_window_max",
+            "residual_std",
+            "prior_xy_std_base",
+            "prior_angle_std_base",
+        )
+        _non_negative(
+            self,
+            "angle_window_base",
+            "angle_window_per_rad",
+            "angle_window_per_m",
+            "xy_window_base",
+            "xy_window_per_m",
+            "xy_window_per_rad",
+            "prior_xy_std_per_m",
+            "prior_angle_std_per_rad",
+            "prior_weight",
+            "min_score",
+            "fine_search_cells",
+            "degenerate_ratio",
+        )
+        _positive_int(self, "coarse_point_stride", "refine_iterations", "min_points")
+        name = type(self).__name__
+        _require(
+            name,
+            "fine_angle_step",
+            self.fine_angle_step,
+            self.fine_angle_step <= self.coarse_angle_step,
+            f"<= coarse_angle_step ({self.coarse_angle_step})",
+        )
+        _require(name, "min_score", self.min_score, self.min_score <= 1.0, "<= 1")
+        _require(
+            name, "degenerate_ratio", self.degenerate_ratio, self.degenerate_ratio <= 1.0, "<= 1"
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SlamConfig:
+    """One robot's SLAM.
+
+    ``mode``: ``"slam"`` matches each scan to the map, seeded by odometry; ``"odometry"``
+    maps with dead-reckoning poses; ``"ground_truth"`` maps with the true poses (given to
+    :meth:`~mrslam_env.slam.slam.RobotSlam.update` in the map frame), for ablations.
+    """
+
+    mode: SlamMode = "slam"
+    """``"slam"``, ``"odometry"`` or ``"ground_truth"``."""
+    grid: GridConfig = field(default_factory=GridConfig)
+    """The occupancy grid and its update."""
+    matcher: MatcherConfig = field(default_factory=MatcherConfig)
+    """Scan-to-map matching (used in ``slam`` mode)."""
+    min_translation: float = 0.05
+    """Motion filter: a scan is matched and integrated only after the robot has moved
+    this far since the last integrated scan, m ..."""
+    min_rotation: float = math.radians(2.0)
+    """... or turned this much, rad; in between, the pose follows odometry."""
+    integrate_rejected_after: int = 10
+    """A scan whose match is rejected is not integrated (the pose follows odometry), unless
+    this many matches in a row have been rejected: then it is integrated at the odometry
+    pose, so that mapping goes on where matching cannot."""
+
+    def __post_init__(self) -> None:
+        _require(
+            type(self).__name__, "mode", self.mode, self.mode in SLAM_MODES, f"one of {SLAM_MODES}"
+        )
+        _non_negative(self, "min_translation", "min_rotation")
+        _positive_int(self, "integrate_rejected_after")
+        for name, cls in (("grid", GridConfig), ("matcher", MatcherConfig)):
+            value = getattr(self, name)
+            _require(type(self).__name__, name, value, isinstance(value, cls), f"a {cls.__name__}")

@@ -1,0 +1,649 @@
+"""A growing log-odds occupancy grid with exact beam integration (DESIGN §2, §4).
+
+:class:`OccupancyGrid` lives in a robot's map frame. It starts as one chunk around the
+map origin and grows by whole chunks in whichever direction a scan needs; its origin stays
+on the lattice of cell corners through the map origin (``origin = index * resolution``), so
+a cell never changes its place in the map frame when the grid grows.
+
+**Integration.** A scan updates the log-odds with an inverse sensor model (Thrun et al.,
+*Probabilistic Robotics*, §9.2): every cell a beam passes (Amanatides & Woo traversal, as in
+:mod:`mrslam_env.slam.raycast`) gets ``log_odds_miss`` once per beam, the cell the beam
+ends in gets ``log_odds_hit``; values are clamped to ``[log_odds_min, log_odds_max]``. Two
+refinements of the textbook model:
+
+* a cell some beam of the scan ends in is not also cleared by the other beams of the same
+  scan (beams grazing a wall would otherwise erase it; Cartographer does the same);
+* a beam with no return (range == max range) clears at most ``no_return_clear_distance``
+  and stops at the first OCCUPIED cell: a dropout in front of a wall is not evidence that
+  the wall is gone.
+
+**Likelihood fields.** The grid keeps the scan matcher's fields current. A field is a sum
+of integer-valued Gaussian kernels, one per OCCUPIED cell, centred not on the cell centre
+but on the cell's mean hit point (quantised to a quarter cell), so that a wall's ridge lies
+on its measured surface. Summing is linear: a cell that turns OCCUPIED adds its kernel, one
+that stops being OCCUPIED (or whose mean point moves) subtracts it again, and the float32
+sums stay exact. There are two kinds:
+
+* the *coarse* field (``coarse_sigma``), one for all cells, for the coarse search;
+* the *fine* fields (``fine_sigma``), one per *facing sector*: a hit on a surface whose
+  sensor-facing normal (from the scan, :func:`~mrslam_env.slam.scan.scan_normals`) lies
+  within 67.5° of the sector's direction (0, 90, 180 or 270° in the map frame) makes its
+  cell count in that sector. A scan point is scored in the sector of its own normal, so it
+  only sees surfaces facing roughly the same way: the two faces of a thin wall, a cell or
+  two apart, would otherwise blur into one ridge in the middle of the wall, and the walls
+  of a corner into a blob.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numba
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mrslam_env.geometry import cell_to_world, world_to_cell
+from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
+from mrslam_env.slam.config import GridConfig
+from mrslam_env.slam.raycast import dda_start
+from mrslam_env.slam.scan import scan_normals
+
+FloatArray = NDArray[np.float64]
+Float32Array = NDArray[np.float32]
+
+__all__ = [
+    "HIT_AVERAGE_CAP",
+    "KERNEL_SCALE",
+    "SECTORS",
+    "SUBCELLS",
+    "OccupancyGrid",
+    "facing_sectors",
+    "gaussian_kernels",
+    "integrate_scan",
+    "scan_extent",
+    "sector_of",
+]
+
+KERNEL_SCALE = 64.0
+"""Peak weight of a likelihood-field kernel; weights are rounded to integers."""
+
+SUBCELLS = 4
+"""A cell's mean hit point is quantised to a SUBCELLS x SUBCELLS lattice in the cell."""
+
+SECTORS = 4
+"""View sectors of the fine fields, centred on the directions ``k * 2 pi / SECTORS``."""
+
+HIT_AVERAGE_CAP = 1000
+"""A cell's mean hit point is the mean of its hits since it last stopped being OCCUPIED,
+over at most this many hits (then an exponential average)."""
+
+
+def gaussian_kernels(sigma: float, resolution: float) -> tuple[Float32Array, float]:
+    """The integer-valued blur kernels of a likelihood field and their normalisation.
+
+    Parameters
+    ----------
+    sigma : float
+        Standard deviation of the blur, m.
+    resolution : float
+        Cell size, m.
+
+    Returns
+    -------
+    kernels : ndarray, shape (SUBCELLS**2, 2k+1, 2k+1), float32
+        Kernel ``q = sy * SUBCELLS + sx`` is centred on the point ``((sx + 0.5) / SUBCELLS,
+        (sy + 0.5) / SUBCELLS)`` of its cell (cell units from the cell's corner) and holds
+        ``round(KERNEL_SCALE * exp(-d^2 / (2 sigma^2)))``, ``d`` (m) from that point to the
+        centres of the cells up to ``k = ceil(2 sigma / resolution + 0.5)`` cells away; index
+        ``[q, k + dy, k + dx]``.
+    line_sum : float
+        The field value on a straight wall, ``KERNEL_SCALE * sqrt(2 pi) * sigma /
+        resolution``: dividing a field by it makes a wall score about 1.
+    """
+    radius = max(1, math.ceil(2.0 * sigma / resolution + 0.5))
+    offsets = np.arange(-radius, radius + 1, dtype=np.float64)
+    sub = (np.arange(SUBCELLS) + 0.5) / SUBCELLS - 0.5  # sub-cell point minus cell centre
+    kernels = np.empty((SUBCELLS * SUBCELLS, 2 * radius + 1, 2 * radius + 1), np.float32)
+    for sy in range(SUBCELLS):
+        for sx in range(SUBCELLS):
+            dy = (offsets - sub[sy])[:, None] * resolution
+            dx = (offsets - sub[sx])[None, :] * resolution
+            weights = KERNEL_SCALE * np.exp(-(dx**2 + dy**2) / (2.0 * sigma**2))
+            kernels[sy * SUBCELLS + sx] = np.round(weights)
+    line_sum = KERNEL_SCALE * math.sqrt(2.0 * math.pi) * sigma / resolution
+    return kernels, line_sum
+
+
+@numba.njit(cache=True)
+def sector_of(direction: float) -> int:
+    """The view sector (0 .. SECTORS-1) whose centre is nearest to a direction (rad)."""
+    width = 2.0 * math.pi / SECTORS
+    return math.floor(direction / width + 0.5) % SECTORS
+
+
+@numba.njit(cache=True)
+def facing_sectors(direction: float) -> int:
+    """Bit mask of the view sectors a hit on a surface facing ``direction`` (rad) counts
+    in: those whose centre lies within 67.5° (1.5 half-widths) of it, one or two."""
+    width = 2.0 * math.pi / SECTORS
+    position = direction / width
+    nearest = math.floor(position + 0.5)
+    offset = position - nearest  # in [-0.5, 0.5)
+    mask = 1 << (int(nearest) % SECTORS)
+    if offset > 0.25:
+        mask |= 1 << (int(nearest + 1) % SECTORS)
+    elif offset < -0.25:
+        mask |= 1 << (int(nearest - 1) % SECTORS)
+    return mask
+
+
+@numba.njit(cache=True)
+def _stamp(field: Float32Array, kernel: Float32Array, iy: int, ix: int, sign: float) -> None:
+    """Add ``sign * kernel`` (2-D, odd square) centred on cell (iy, ix), clipped to the
+    field."""
+    rows, cols = field.shape
+    radius = kernel.shape[0] // 2
+    for ky in range(kernel.shape[0]):
+        y = iy + ky - radius
+        if y < 0 or y >= rows:
+            continue
+        for kx in range(kernel.shape[1]):
+            x = ix + kx - radius
+            if 0 <= x < cols:
+                field[y, x] += sign * kernel[ky, kx]
+
+
+@numba.njit(cache=True)
+def _restamp(
+    fine_fields: Float32Array,
+    coarse_field: Float32Array,
+    fine_kernels: Float32Array,
+    coarse_kernels: Float32Array,
+    stamp_index: NDArray[np.int8],
+    sector_mask: NDArray[np.uint8],
+    iy: int,
+    ix: int,
+    new_index: int,
+    new_mask: int,
+) -> None:
+    """Change cell (iy, ix)'s share of the fields to sub-cell kernel ``new_index`` in the
+    sectors of ``new_mask`` (``new_index = -1``: no share at all).
+
+    Kept out of line: it runs rarely, and inlining it into the traversal loop slows that
+    loop tenfold.
+    """
+    old_index = int(stamp_index[iy, ix])
+    old_mask = int(sector_mask[iy, ix]) if old_index >= 0 else 0
+    if new_index < 0:
+        new_mask = 0
+    moved = new_index != old_index
+    if moved:
+        if old_index >= 0:
+            _stamp(coarse_field, coarse_kernels[old_index], iy, ix, -1.0)
+        if new_index >= 0:
+            _stamp(coarse_field, coarse_kernels[new_index], iy, ix, 1.0)
+    for k in range(SECTORS):
+        bit = 1 << k
+        had = (old_mask & bit) != 0
+        has = (new_mask & bit) != 0
+        if had and (moved or not has):
+            _stamp(fine_fields[k], fine_kernels[old_index], iy, ix, -1.0)
+        if has and (moved or not had):
+            _stamp(fine_fields[k], fine_kernels[new_index], iy, ix, 1.0)
+    stamp_index[iy, ix] = new_index
+    sector_mask[iy, ix] = new_mask
+
+
+@numba.njit(cache=True)
+def scan_extent(
+    x: float,
+    y: float,
+    heading: float,
+    ranges: FloatArray,
+    max_range: float,
+    min_range: float,
+    no_return_clear_distance: float,
+) -> tuple[float, float, float, float]:
+    """Bounding box ``(xmin, ymin, xmax, ymax)`` (m) of the sensor and every point a scan
+    integrated at pose (x, y, heading) will touch."""
+    n = ranges.shape[0]
+    dtheta = 2.0 * math.pi / n
+    xmin, xmax, ymin, ymax = x, x, y, y
+    for i in range(n):
+        r = ranges[i]
+        if not r >= min_range:  # also skips NaN
+            continue
+        if r >= max_range:
+            r = no_return_clear_distance
+        a = heading - math.pi + i * dtheta
+        ex, ey = x + r * math.cos(a), y + r * math.sin(a)
+        xmin, xmax = min(xmin, ex), max(xmax, ex)
+        ymin, ymax = min(ymin, ey), max(ymax, ey)
+    return xmin, ymin, xmax, ymax
+
+
+@numba.njit(cache=True)
+def integrate_scan(
+    log_odds: Float32Array,
+    hit_marks: NDArray[np.int32],
+    hit_mean: Float32Array,
+    hit_count: NDArray[np.int32],
+    stamp_index: NDArray[np.int8],
+    sector_mask: NDArray[np.uint8],
+    fine_fields: Float32Array,
+    coarse_field: Float32Array,
+    fine_kernels: Float32Array,
+    coarse_kernels: Float32Array,
+    scan_id: int,
+    origin_x: float,
+    origin_y: float,
+    resolution: float,
+    x: float,
+    y: float,
+    heading: float,
+    ranges: FloatArray,
+    normals: FloatArray,
+    max_range: float,
+    min_range: float,
+    no_return_clear_distance: float,
+    log_odds_hit: float,
+    log_odds_miss: float,
+    log_odds_min: float,
+    log_odds_max: float,
+    occupied_threshold: float,
+) -> int:
+    """Integrate one scan into a log-odds grid and its likelihood fields (in place).
+
+    Parameters
+    ----------
+    log_odds : ndarray, shape (rows, cols), float32
+        The grid.
+    hit_marks : ndarray, shape (rows, cols), int32
+        Scratch: cells ending a beam of this scan are set to ``scan_id``, which must differ
+        from every value already in it (the caller counts scans up from 1).
+    hit_mean : ndarray, shape (rows, cols, 2), float32
+        Per cell, the running mean ``(x, y)`` of the hit points inside it, in cell units
+        from the cell's corner (in [0, 1)).
+    hit_count : ndarray, shape (rows, cols), int32
+        Hits in that mean (capped at ``HIT_AVERAGE_CAP``); reset to 0 when the cell stops
+        being OCCUPIED, so that the mean starts afresh.
+    stamp_index : ndarray, shape (rows, cols), int8
+        The sub-cell kernel each cell adds to the fields, -1 for none; kept >= 0 exactly
+        for the cells with log-odds above ``occupied_threshold``.
+    sector_mask : ndarray, shape (rows, cols), uint8
+        The fine fields (bit k: sector k) an OCCUPIED cell adds its kernel to.
+    fine_fields : ndarray, shape (SECTORS, rows, cols), float32
+    coarse_field : ndarray, shape (rows, cols), float32
+        The likelihood fields: sums of the stamped kernels.
+    fine_kernels, coarse_kernels : ndarray, shape (SUBCELLS**2, K, K), float32
+        From :func:`gaussian_kernels`.
+    scan_id : int
+    origin_x, origin_y, resolution : float
+        Grid placement (DESIGN §2), m.
+    x, y, heading : float
+        Sensor pose in the grid's frame, m, m, rad.
+    ranges : ndarray, shape (N,), float64
+        Beam i at ``heading - pi + i 2 pi / N``; ``>= max_range`` means no return; below
+        ``min_range`` (or NaN) the beam is skipped.
+    normals : ndarray, shape (N, 2), float64
+        Sensor-facing surface normal of each return in the sensor frame
+        (:func:`~mrslam_env.slam.scan.scan_normals`), ``(0, 0)`` where unknown: it picks
+        the view sectors the hit counts in (the beam's reverse direction stands in for a
+        missing normal).
+    max_range, min_range, no_return_clear_distance : float
+        m.
+    log_odds_hit, log_odds_miss, log_odds_min, log_odds_max, occupied_threshold : float
+        The update (see :class:`~mrslam_env.slam.config.GridConfig`).
+
+    Returns
+    -------
+    int
+        How many cells turned OCCUPIED or stopped being OCCUPIED.
+    """
+    rows, cols = log_odds.shape
+    n = ranges.shape[0]
+    dtheta = 2.0 * math.pi / n
+    flips = 0
+    # Pass 1: mark the end cell of every returning beam.
+    for i in range(n):
+        r = ranges[i]
+        if not (min_range <= r < max_range):
+            continue
+        a = heading - math.pi + i * dtheta
+        ix = math.floor((x + r * math.cos(a) - origin_x) / resolution)
+        iy = math.floor((y + r * math.sin(a) - origin_y) / resolution)
+        if 0 <= iy < rows and 0 <= ix < cols:
+            hit_marks[iy, ix] = scan_id
+    # Pass 2: misses along every beam (Amanatides & Woo), skipping this scan's hit cells.
+    for i in range(n):
+        r = ranges[i]
+        if not r >= min_range:
+            continue
+        returned = r < max_range
+        if not returned:
+            r = no_return_clear_distance
+            if r <= 0.0:
+                continue
+        a = heading - math.pi + i * dtheta
+        # The same set-up as raycast.traverse, so both visit the very same cells.
+        ix, iy, step_x, step_y, t_max_x, t_max_y, t_delta_x, t_delta_y, n_steps = dda_start(
+            x, y, x + r * math.cos(a), y + r * math.sin(a), origin_x, origin_y, resolution
+        )
+        for k in range(n_steps + 1):
+            if k > 0:
+                if t_max_x < t_max_y:
+                    ix += step_x
+                    t_max_x += t_delta_x
+                else:
+                    iy += step_y
+                    t_max_y += t_delta_y
+            if not (0 <= iy < rows and 0 <= ix < cols):
+                continue
+            before = log_odds[iy, ix]
+            if returned:
+                # Most cells a beam crosses are known free and clamped: a miss changes
+                # nothing there, so skip them before touching ``hit_marks``.
+                if before <= log_odds_min or hit_marks[iy, ix] == scan_id:
+                    continue
+            elif hit_marks[iy, ix] == scan_id or before > occupied_threshold:
+                break
+            elif before <= log_odds_min:
+                continue
+            after = np.float32(max(before + log_odds_miss, log_odds_min))
+            log_odds[iy, ix] = after
+            if before > occupied_threshold >= after:
+                _restamp(
+                    fine_fields, coarse_field, fine_kernels, coarse_kernels, stamp_index,
+                    sector_mask, iy, ix, -1, 0,
+                )  # fmt: skip
+                hit_count[iy, ix] = 0
+                flips += 1
+    # Pass 3: one hit per returning beam at its end cell; the cell's mean hit point decides
+    # where its kernel sits, the surface's facing which fine fields it counts in.
+    for i in range(n):
+        r = ranges[i]
+        if not (min_range <= r < max_range):
+            continue
+        a = heading - math.pi + i * dtheta
+        gx = (x + r * math.cos(a) - origin_x) / resolution
+        gy = (y + r * math.sin(a) - origin_y) / resolution
+        ix, iy = math.floor(gx), math.floor(gy)
+        if not (0 <= iy < rows and 0 <= ix < cols):
+            continue
+        count = min(hit_count[iy, ix] + 1, HIT_AVERAGE_CAP)
+        hit_count[iy, ix] = count
+        mean_x = hit_mean[iy, ix, 0] + (gx - ix - hit_mean[iy, ix, 0]) / count
+        mean_y = hit_mean[iy, ix, 1] + (gy - iy - hit_mean[iy, ix, 1]) / count
+        hit_mean[iy, ix, 0] = mean_x
+        hit_mean[iy, ix, 1] = mean_y
+        # Round to float32 before comparing: the stored value decides the cell's state.
+        after = np.float32(min(max(log_odds[iy, ix] + log_odds_hit, log_odds_min), log_odds_max))
+        log_odds[iy, ix] = after
+        if after > occupied_threshold:
+            sub_x = min(int(mean_x * SUBCELLS), SUBCELLS - 1)
+            sub_y = min(int(mean_y * SUBCELLS), SUBCELLS - 1)
+            new_index = sub_y * SUBCELLS + sub_x
+            old_index = stamp_index[iy, ix]
+            if normals[i, 0] != 0.0 or normals[i, 1] != 0.0:
+                facing = heading + math.atan2(normals[i, 1], normals[i, 0])
+            else:
+                facing = a + math.pi
+            mask = facing_sectors(facing)
+            if old_index >= 0:
+                mask |= sector_mask[iy, ix]
+            if new_index != old_index or mask != sector_mask[iy, ix]:
+                if old_index < 0:
+                    flips += 1
+                _restamp(
+                    fine_fields, coarse_field, fine_kernels, coarse_kernels, stamp_index,
+                    sector_mask, iy, ix, new_index, mask,
+                )  # fmt: skip
+    return flips
+
+
+class OccupancyGrid:
+    """A log-odds occupancy grid that grows as the robot explores.
+
+    Coordinates are in the grid's own frame (for onboard SLAM: the robot's map frame).
+    Cell conventions are those of DESIGN §2 (``[iy, ix]``, row 0 at the lowest y,
+    ``origin`` the corner of cell [0, 0]).
+
+    Parameters
+    ----------
+    config : GridConfig, optional
+        Resolution, log-odds update, likelihood-field widths, growth chunk.
+    """
+
+    def __init__(self, config: GridConfig | None = None) -> None:
+        self.config = config if config is not None else GridConfig()
+        self.resolution = self.config.resolution
+        self.fine_kernels, fine_sum = gaussian_kernels(self.config.fine_sigma, self.resolution)
+        self.coarse_kernels, coarse_sum = gaussian_kernels(
+            self.config.coarse_sigma, self.resolution
+        )
+        self.fine_scale = 1.0 / fine_sum
+        """Multiply a fine field by this to get a likelihood of about 1 on a wall."""
+        self.coarse_scale = 1.0 / coarse_sum
+        """Multiply the coarse field by this to get a likelihood of about 1 on a wall."""
+        radius = max(self.fine_kernels.shape[1], self.coarse_kernels.shape[1]) // 2
+        self._margin = radius + 2
+        self._scan_id = 0
+        chunk = self.config.growth_chunk
+        # Cell index (iy, ix) of the origin on the lattice through the frame's (0, 0).
+        self._origin_index = (-chunk // 2, -chunk // 2)
+        shape = (chunk, chunk)
+        self._log_odds = np.zeros(shape, dtype=np.float32)
+        self._hit_marks = np.zeros(shape, dtype=np.int32)
+        self._hit_mean = np.zeros((*shape, 2), dtype=np.float32)
+        self._hit_count = np.zeros(shape, dtype=np.int32)
+        self._stamp_index = np.full(shape, -1, dtype=np.int8)
+        self._sector_mask = np.zeros(shape, dtype=np.uint8)
+        self._fine_fields = np.zeros((SECTORS, *shape), dtype=np.float32)
+        self._coarse_field = np.zeros((1, *shape), dtype=np.float32)
+
+    # --- placement ----------------------------------------------------------------------
+
+    @property
+    def origin(self) -> tuple[float, float]:
+        """Frame ``(x, y)`` of the outer corner of cell [0, 0], m (always a whole number of
+        cells from the frame's origin)."""
+        return (self._origin_index[1] * self.resolution, self._origin_index[0] * self.resolution)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(rows, cols)``."""
+        return (int(self._log_odds.shape[0]), int(self._log_odds.shape[1]))
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """Frame bounds ``(xmin, ymin, xmax, ymax)``, m."""
+        x0, y0 = self.origin
+        rows, cols = self.shape
+        return (x0, y0, x0 + cols * self.resolution, y0 + rows * self.resolution)
+
+    def world_to_cell(self, points: ArrayLike) -> NDArray[np.int64]:
+        """Cell indices ``(iy, ix)`` (..., 2) of frame points ``(x, y)`` (..., 2), not
+        clipped."""
+        return world_to_cell(points, self.origin, self.resolution)
+
+    def cell_to_world(self, cells: ArrayLike) -> FloatArray:
+        """Frame coordinates ``(x, y)`` (..., 2) of the centres of cells ``(iy, ix)``."""
+        return cell_to_world(cells, self.origin, self.resolution)
+
+    # --- contents -----------------------------------------------------------------------
+
+    @staticmethod
+    def _read_only(array: NDArray[Any]) -> NDArray[Any]:
+        view = array.view()
+        view.flags.writeable = False
+        return view
+
+    @property
+    def log_odds(self) -> Float32Array:
+        """Log-odds (rows, cols), float32, read-only view (positive = occupied)."""
+        return self._read_only(self._log_odds)
+
+    @property
+    def fine_fields(self) -> Float32Array:
+        """Fine likelihood fields (SECTORS, rows, cols), float32, read-only: per view
+        sector, the sum over the OCCUPIED cells hit from that sector of a Gaussian
+        (``fine_sigma``) centred on the cell's mean hit point, sampled at cell centres;
+        times :attr:`fine_scale` about 1 on a wall."""
+        return self._read_only(self._fine_fields)
+
+    @property
+    def coarse_field(self) -> Float32Array:
+        """Coarse likelihood field (1, rows, cols), float32, read-only: as a fine field
+        with ``coarse_sigma`` over every OCCUPIED cell; times :attr:`coarse_scale` about 1
+        on a wall."""
+        return self._read_only(self._coarse_field)
+
+    @property
+    def stamp_index(self) -> NDArray[np.int8]:
+        """Per cell, the sub-cell kernel (``sy * SUBCELLS + sx``) it adds to the fields, -1
+        for cells that are not OCCUPIED; read-only."""
+        return self._read_only(self._stamp_index)
+
+    @property
+    def sector_mask(self) -> NDArray[np.uint8]:
+        """Per OCCUPIED cell, the fine fields it counts in (bit k: sector k); read-only."""
+        return self._read_only(self._sector_mask)
+
+    def probability(self) -> FloatArray:
+        """Occupancy probability per cell (rows, cols), 0.5 where nothing is known."""
+        return 1.0 / (1.0 + np.exp(-self._log_odds.astype(np.float64)))
+
+    def occupied(self) -> NDArray[np.bool_]:
+        """Cells whose log-odds exceed ``occupied_threshold`` (rows, cols)."""
+        return self._log_odds > self.config.occupied_threshold
+
+    def to_gridmap(self) -> GridMap:
+        """The trinary view: OCCUPIED above ``occupied_threshold``, FREE below
+        ``free_threshold``, else UNKNOWN, placed in the grid's frame."""
+        cells = np.full(self.shape, UNKNOWN, dtype=np.int8)
+        cells[self._log_odds < self.config.free_threshold] = FREE
+        cells[self._log_odds > self.config.occupied_threshold] = OCCUPIED
+        return GridMap(cells=cells, resolution=self.resolution, origin=self.origin)
+
+    # --- growth -------------------------------------------------------------------------
+
+    def ensure_contains(self, xmin: float, ymin: float, xmax: float, ymax: float) -> bool:
+        """Grow (by whole chunks per side) until the box plus a margin of cells lies inside.
+
+        The margin covers the likelihood kernels, so stamps are never clipped and the fields
+        stay exact through growth. Returns True if the grid grew.
+        """
+        res = self.resolution
+        x0, y0 = self.origin
+        rows, cols = self.shape
+        m = self._margin
+        lo_x = math.floor((xmin - x0) / res) - m
+        lo_y = math.floor((ymin - y0) / res) - m
+        hi_x = math.floor((xmax - x0) / res) + m
+        hi_y = math.floor((ymax - y0) / res) + m
+        if lo_x >= 0 and lo_y >= 0 and hi_x < cols and hi_y < rows:
+            return False
+        chunk = self.config.growth_chunk
+        add_left = chunk * math.ceil(-lo_x / chunk) if lo_x < 0 else 0
+        add_bottom = chunk * math.ceil(-lo_y / chunk) if lo_y < 0 else 0
+        add_right = chunk * math.ceil((hi_x - cols + 1) / chunk) if hi_x >= cols else 0
+        add_top = chunk * math.ceil((hi_y - rows + 1) / chunk) if hi_y >= rows else 0
+        new_rows = rows + add_bottom + add_top
+        new_cols = cols + add_left + add_right
+        rows_window = slice(add_bottom, add_bottom + rows)
+        cols_window = slice(add_left, add_left + cols)
+
+        def grown(old: NDArray[Any], fill: float = 0, leading: int = 0) -> NDArray[Any]:
+            """``old`` placed in a larger array; axes ``leading`` and ``leading + 1`` are
+            rows and columns."""
+            shape = (*old.shape[:leading], new_rows, new_cols, *old.shape[leading + 2 :])
+            new = np.full(shape, fill, dtype=old.dtype)
+            new[(slice(None),) * leading + (rows_window, cols_window)] = old
+            return new
+
+        self._log_odds = grown(self._log_odds)
+        self._hit_marks = grown(self._hit_marks)
+        self._hit_mean = grown(self._hit_mean)
+        self._hit_count = grown(self._hit_count)
+        self._stamp_index = grown(self._stamp_index, -1)
+        self._sector_mask = grown(self._sector_mask)
+        self._fine_fields = grown(self._fine_fields, leading=1)
+        self._coarse_field = grown(self._coarse_field, leading=1)
+        self._origin_index = (
+            self._origin_index[0] - add_bottom,
+            self._origin_index[1] - add_left,
+        )
+        return True
+
+    # --- integration --------------------------------------------------------------------
+
+    def integrate_scan(
+        self,
+        pose: ArrayLike,
+        ranges: ArrayLike,
+        max_range: float,
+        normals: FloatArray | None = None,
+    ) -> int:
+        """Integrate one scan taken at ``pose`` (x, y, theta in the grid's frame).
+
+        Parameters
+        ----------
+        pose : array_like, shape (3,)
+            Sensor pose, m, m, rad.
+        ranges : array_like, shape (N,)
+            Beam i at ``theta - pi + i 2 pi / N`` (as
+            :func:`mrslam_env.sim.lidar.beam_angles`); ``>= max_range`` means no return.
+        max_range : float
+            The lidar's maximum range, m.
+        normals : ndarray, shape (N, 2), optional
+            The scan's normals (:func:`~mrslam_env.slam.scan.scan_normals`), if already
+            known.
+
+        Returns
+        -------
+        int
+            How many cells turned OCCUPIED or stopped being OCCUPIED.
+        """
+        x, y, heading = (float(v) for v in np.asarray(pose, dtype=np.float64))
+        scan = np.asarray(ranges, dtype=np.float64)
+        if scan.ndim != 1 or len(scan) == 0:
+            raise ValueError(f"ranges must have shape (N,) with N > 0, got {scan.shape}")
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(heading)):
+            raise ValueError(f"pose must be finite, got {(x, y, heading)}")
+        config = self.config
+        clear = min(config.no_return_clear_distance, max_range)
+        self.ensure_contains(*scan_extent(x, y, heading, scan, max_range, config.min_range, clear))
+        self._scan_id += 1
+        x0, y0 = self.origin
+        return int(
+            integrate_scan(
+                self._log_odds,
+                self._hit_marks,
+                self._hit_mean,
+                self._hit_count,
+                self._stamp_index,
+                self._sector_mask,
+                self._fine_fields,
+                self._coarse_field[0],
+                self.fine_kernels,
+                self.coarse_kernels,
+                self._scan_id,
+                x0,
+                y0,
+                self.resolution,
+                x,
+                y,
+                heading,
+                scan,
+                scan_normals(scan, max_range, config.min_range) if normals is None else normals,
+                float(max_range),
+                config.min_range,
+                clear,
+                config.log_odds_hit,
+                config.log_odds_miss,
+                config.log_odds_min,
+                config.log_odds_max,
+                config.occupied_threshold,
+            )
+        )

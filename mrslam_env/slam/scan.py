@@ -1,0 +1,120 @@
+"""A lidar scan as geometry: its returns as points and their surface normals.
+
+Beam ``i`` of ``N`` points at ``-pi + i 2 pi / N`` from the sensor's heading, as in
+:func:`mrslam_env.sim.lidar.beam_angles`; a range at or beyond the maximum range is no return.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+__all__ = ["NORMAL_HALF_WIDTH", "NORMAL_MAX_GAP", "scan_normals", "scan_points"]
+
+NORMAL_HALF_WIDTH = 2
+"""Neighbours either side (beams) that :func:`scan_normals` fits a line through."""
+
+NORMAL_MAX_GAP = 0.05
+"""Neighbours further apart than this (m) plus twice the beam spacing at the return's range
+are not on the same surface."""
+
+
+@numba.njit(cache=True)
+def scan_points(ranges: FloatArray, max_range: float, min_range: float) -> FloatArray:
+    """Returns of a scan as points (M, 2) in the sensor frame, m.
+
+    Beam i points at ``-pi + i 2 pi / N``; beams at or beyond ``max_range`` (no return),
+    below ``min_range`` or NaN are left out.
+    """
+    n = ranges.shape[0]
+    dtheta = 2.0 * math.pi / n
+    points = np.empty((n, 2))
+    count = 0
+    for i in range(n):
+        r = ranges[i]
+        if min_range <= r < max_range:
+            a = -math.pi + i * dtheta
+            points[count, 0] = r * math.cos(a)
+            points[count, 1] = r * math.sin(a)
+            count += 1
+    return points[:count]
+
+
+@numba.njit(cache=True)
+def scan_normals(
+    ranges: FloatArray,
+    max_range: float,
+    min_range: float,
+    half_width: int = NORMAL_HALF_WIDTH,
+    max_gap: float = NORMAL_MAX_GAP,
+) -> FloatArray:
+    """Unit surface normals (N, 2) of a scan's returns, sensor frame, facing the sensor.
+
+    The normal of a return is the direction of least spread (total least squares) of it
+    and its returning neighbours up to ``half_width`` beams either side that lie within
+    ``max_gap`` m plus twice the beam spacing at its range, turned to face the sensor.
+    Beams without a return, returns with fewer than two such neighbours, and returns whose
+    neighbourhood is not line-like (spread across above a quarter of the spread along) get
+    ``(0, 0)``. Row i belongs to beam i (not compacted like :func:`scan_points`).
+    """
+    n = ranges.shape[0]
+    dtheta = 2.0 * math.pi / n
+    xs = np.empty(n)
+    ys = np.empty(n)
+    valid = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        r = ranges[i]
+        if min_range <= r < max_range:
+            a = -math.pi + i * dtheta
+            xs[i] = r * math.cos(a)
+            ys[i] = r * math.sin(a)
+            valid[i] = True
+    normals = np.zeros((n, 2))
+    for i in range(n):
+        if not valid[i]:
+            continue
+        limit = max_gap + 2.0 * ranges[i] * dtheta
+        sx = sy = sxx = syy = sxy = 0.0
+        members = 0
+        for k in range(-half_width, half_width + 1):
+            j = (i + k) % n
+            if not valid[j]:
+                continue
+            dx, dy = xs[j] - xs[i], ys[j] - ys[i]
+            if dx * dx + dy * dy > limit * limit:
+                continue
+            sx += dx
+            sy += dy
+            sxx += dx * dx
+            syy += dy * dy
+            sxy += dx * dy
+            members += 1
+        if members < 3:
+            continue
+        mx, my = sx / members, sy / members
+        cxx = sxx / members - mx * mx
+        cyy = syy / members - my * my
+        cxy = sxy / members - mx * my
+        half_trace = 0.5 * (cxx + cyy)
+        root = math.sqrt(max(0.25 * (cxx - cyy) ** 2 + cxy * cxy, 0.0))
+        largest, smallest = half_trace + root, half_trace - root
+        if not (largest > 0.0 and smallest <= 0.0625 * largest):
+            continue
+        # Eigenvector of the smallest eigenvalue of the 2 x 2 covariance.
+        if abs(cxy) > 1e-15:
+            nx, ny = smallest - cyy, cxy
+        elif cxx <= cyy:
+            nx, ny = 1.0, 0.0
+        else:
+            nx, ny = 0.0, 1.0
+        norm = math.sqrt(nx * nx + ny * ny)
+        if nx * xs[i] + ny * ys[i] > 0.0:  # face the sensor
+            norm = -norm
+        normals[i, 0] = nx / norm
+        normals[i, 1] = ny / norm
+    return normals

@@ -1,0 +1,226 @@
+"""One robot's onboard SLAM: a growing occupancy grid and scan-to-map matching (DESIGN §4).
+
+:class:`RobotSlam` takes, every step, the robot's dead-reckoning pose (its odom frame) and
+its lidar scan, and returns its pose in its *map* frame. The map frame is the robot's start
+pose, i.e. the odom frame at the first update, so the first pose is ``(0, 0, 0)``.
+
+Per update (``mode="slam"``):
+
+1. **Predict**: apply the odometry motion since the last integrated scan to the pose of that
+   scan (``pose_k = pose_ref ∘ inverse(odom_ref) ∘ odom_k``).
+2. **Motion filter**: unless the robot has moved ``min_translation`` or turned
+   ``min_rotation`` since the last integrated scan, stop here (the prediction is the pose).
+3. **Match** the scan to the map from the prediction
+   (:func:`~mrslam_env.slam.matcher.match_scan`); if the match is rejected, keep the
+   prediction (fall back to odometry) and do not integrate the scan, unless
+   ``integrate_rejected_after`` matches in a row have failed (then mapping goes on with
+   odometry, e.g. into an area the map does not cover yet).
+4. **Integrate** the scan at the resulting pose (:meth:`OccupancyGrid.integrate_scan`).
+
+``mode="odometry"`` skips step 3 (the pose is the odometry itself) and
+``mode="ground_truth"`` replaces steps 1–3 by the true pose (in the map frame) passed in.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mrslam_env.geometry import wrap_scalar
+from mrslam_env.slam.config import SlamConfig
+from mrslam_env.slam.grid import OccupancyGrid
+from mrslam_env.slam.matcher import MatchResult, match_scan
+from mrslam_env.slam.scan import scan_normals
+
+FloatArray = NDArray[np.float64]
+
+__all__ = ["RobotSlam"]
+
+
+def _relative(
+    a: tuple[float, float, float], b: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    """``inverse(a) ∘ b`` for scalar poses (a fast path for the per-step bookkeeping)."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    return (c * dx + s * dy, -s * dx + c * dy, wrap_scalar(b[2] - a[2]))
+
+
+def _compose(
+    a: tuple[float, float, float], b: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    """``a ∘ b`` for scalar poses."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return (a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_scalar(a[2] + b[2]))
+
+
+def _as_pose(value: ArrayLike, name: str) -> tuple[float, float, float]:
+    array = np.asarray(value, dtype=np.float64)
+    if array.shape != (3,) or not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} must be a finite (x, y, theta), got {value!r}")
+    return (float(array[0]), float(array[1]), float(array[2]))
+
+
+class RobotSlam:
+    """Grid SLAM for one robot, in its own map frame.
+
+    Parameters
+    ----------
+    config : SlamConfig or None
+        Mode, motion filter, grid and matcher settings (None: the defaults).
+    n_beams : int
+        Beams per scan (beam i at ``-pi + i 2 pi / n_beams`` from the heading).
+    max_range : float
+        The lidar's maximum range, m; a range at or above it means no return.
+
+    Examples
+    --------
+    >>> slam = RobotSlam(SlamConfig(), n_beams=360, max_range=8.0)  # doctest: +SKIP
+    >>> pose_in_map = slam.update(obs["odom"], obs["scan"])  # doctest: +SKIP
+    >>> gridmap = slam.grid.to_gridmap()  # doctest: +SKIP
+    """
+
+    def __init__(self, config: SlamConfig | None, n_beams: int, max_range: float) -> None:
+        if not isinstance(n_beams, int) or n_beams < 4:
+            raise ValueError(f"n_beams must be an int >= 4, got {n_beams!r}")
+        if not (math.isfinite(max_range) and max_range > 0):
+            raise ValueError(f"max_range must be > 0 m, got {max_range!r}")
+        self.config = config if config is not None else SlamConfig()
+        self.n_beams = n_beams
+        self.max_range = float(max_range)
+        self.grid = OccupancyGrid(self.config.grid)
+        self._pose = (0.0, 0.0, 0.0)
+        self._reference_pose: tuple[float, float, float] | None = None
+        self._reference_odom = (0.0, 0.0, 0.0)
+        self._trajectory = np.zeros((256, 3))
+        self._length = 0
+        self.last_match: MatchResult | None = None
+        """The most recent match (``None`` before the first one, and in other modes)."""
+        self.n_integrated = 0
+        """Scans integrated so far."""
+        self.n_rejected = 0
+        """Matches rejected so far (the pose fell back to odometry)."""
+        self._rejected_in_a_row = 0
+
+    # --- state --------------------------------------------------------------------------
+
+    @property
+    def pose(self) -> FloatArray:
+        """Current pose ``(x, y, theta)`` in the map frame."""
+        return np.array(self._pose)
+
+    @property
+    def trajectory(self) -> FloatArray:
+        """Every pose returned by :meth:`update` so far, (T, 3), map frame."""
+        return self._trajectory[: self._length].copy()
+
+    @property
+    def map_from_odom(self) -> FloatArray:
+        """``map_from_odom`` as of the last update: ``pose = map_from_odom ∘ odom_pose``.
+
+        In ``odometry`` mode it stays ``inverse(first odom_pose)`` (the identity when, as in
+        the env, odometry starts at zero); in ``slam`` mode it absorbs the corrections."""
+        if self._reference_pose is None:
+            return np.zeros(3)
+        return np.array(
+            _compose(self._reference_pose, _relative(self._reference_odom, (0.0, 0.0, 0.0)))
+        )
+
+    # --- the update ---------------------------------------------------------------------
+
+    def update(
+        self,
+        odom_pose: ArrayLike,
+        ranges: ArrayLike,
+        true_pose_in_map: ArrayLike | None = None,
+    ) -> FloatArray:
+        """Process one step: odometry and scan in, pose in the map frame out.
+
+        Parameters
+        ----------
+        odom_pose : array_like, shape (3,)
+            Dead-reckoning pose in the robot's odom frame (the env's ``odom`` observation).
+        ranges : array_like, shape (n_beams,)
+            The scan (the env's ``scan`` observation), m.
+        true_pose_in_map : array_like, shape (3,), optional
+            The true pose in the map frame; required in ``ground_truth`` mode, ignored
+            otherwise.
+
+        Returns
+        -------
+        ndarray, shape (3,)
+            The pose in the map frame.
+        """
+        odom = _as_pose(odom_pose, "odom_pose")
+        scan = np.asarray(ranges, dtype=np.float64)
+        if scan.shape != (self.n_beams,):
+            raise ValueError(f"ranges must have shape ({self.n_beams},), got {scan.shape}")
+        mode = self.config.mode
+        truth = None
+        if mode == "ground_truth":
+            if true_pose_in_map is None:
+                raise ValueError("ground_truth mode needs true_pose_in_map")
+            truth = _as_pose(true_pose_in_map, "true_pose_in_map")
+
+        if self._reference_pose is None:
+            # The map frame is the start pose.
+            pose = truth if truth is not None else (0.0, 0.0, 0.0)
+            self._integrate(pose, odom, scan)
+            return self._record(pose)
+
+        reference = self._reference_pose
+        motion = _relative(self._reference_odom, odom)
+        predicted = _compose(reference, motion)
+        if truth is not None:
+            predicted = truth
+        translation = math.hypot(motion[0], motion[1])
+        rotation = abs(motion[2])
+        if translation < self.config.min_translation and rotation < self.config.min_rotation:
+            return self._record(predicted)
+        pose = predicted
+        normals = scan_normals(scan, self.max_range, self.config.grid.min_range)
+        if mode == "slam":
+            result = match_scan(
+                self.grid,
+                scan,
+                self.max_range,
+                np.array(predicted),
+                translation,
+                rotation,
+                self.config.matcher,
+                normals,
+            )
+            self.last_match = result
+            pose = (float(result.pose[0]), float(result.pose[1]), float(result.pose[2]))
+            if not result.accepted:
+                self.n_rejected += 1
+                self._rejected_in_a_row += 1
+                if self._rejected_in_a_row < self.config.integrate_rejected_after:
+                    # A scan placed by odometry alone would smear a wrong copy of the walls
+                    # into the map; keep the reference, so the next window is wider.
+                    return self._record(pose)
+            self._rejected_in_a_row = 0
+        self._integrate(pose, odom, scan, normals)
+        return self._record(pose)
+
+    def _integrate(
+        self,
+        pose: tuple[float, float, float],
+        odom: tuple[float, float, float],
+        scan: FloatArray,
+        normals: FloatArray | None = None,
+    ) -> None:
+        self.grid.integrate_scan(pose, scan, self.max_range, normals)
+        self._reference_pose = pose
+        self._reference_odom = odom
+        self.n_integrated += 1
+
+    def _record(self, pose: tuple[float, float, float]) -> FloatArray:
+        self._pose = pose
+        if self._length == len(self._trajectory):
+            self._trajectory = np.concatenate([self._trajectory, np.zeros_like(self._trajectory)])
+        self._trajectory[self._length] = pose
+        self._length += 1
+        return np.array(pose)

@@ -1,0 +1,195 @@
+"""The onboard-SLAM benchmark behind ``mrslam bench slam``.
+
+Per scenario: one seeded run of the env (two robots driven by
+:class:`agents.wander.WanderPolicy`), each robot's ``odom`` and ``scan`` fed to a
+:class:`~mrslam_env.slam.slam.RobotSlam` in ``slam`` mode and, on the same data, to one in
+``odometry`` mode. Reported (means over the robots, per-robot values alongside):
+
+==================  ==============================================================
+``ate_slam``        absolute trajectory error of SLAM, m (RMSE of positions; the map
+                    frame is put in the world by the robot's true start pose)
+``ate_odometry``    the same for dead reckoning
+``ratio``           ``ate_slam / ate_odometry``
+``map_agreement``   :func:`~mrslam_env.slam.evaluation.map_agreement` of the SLAM map
+                    with the ground-truth raster at the map's resolution
+``update_ms``       median time of one SLAM update (one robot, one step), ms; also
+                    ``update_mean_ms``
+``steps_per_s``     env steps per second with SLAM on for both robots: the env step plus
+                    both robots' ``slam`` updates are timed (not the policy, not the
+                    ``odometry``-mode replay)
+==================  ==============================================================
+
+Targets (the SLAM issue): ``ate_slam <= 0.10`` m, ``ratio <= 1/3``, ``map_agreement >=
+0.97``, ``steps_per_s >= 500``.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from agents.wander import WanderPolicy
+from mrslam_env.config import EnvConfig
+from mrslam_env.env import MultiRobotSlamEnv
+from mrslam_env.sim.lidar import cast_scan
+from mrslam_env.sim.world import box, ground_truth_map, polygon_edges
+from mrslam_env.slam.config import SlamConfig
+from mrslam_env.slam.evaluation import absolute_trajectory_error, map_agreement
+from mrslam_env.slam.slam import RobotSlam
+from mrslam_env.worlds import build_world
+
+__all__ = ["DEFAULT_SCENARIOS", "format_slam_table", "run_slam_benchmark", "warm_up"]
+
+DEFAULT_SCENARIOS = ("office", "warehouse", "maze", "twin_wings", "procedural-0")
+
+
+def warm_up(config: SlamConfig | None = None) -> None:
+    """Run every SLAM kernel once (loading or compiling them) so that timings that follow
+    measure work, not numba."""
+    walls = [box(-3, -3, 3, -2.9), box(-3, 2.9, 3, 3), box(-3, -3, -2.9, 3), box(2.9, -3, 3, 3)]
+    segments = polygon_edges(np.stack(walls))
+    slam = RobotSlam(config, 360, 8.0)
+    for k in range(3):
+        x = 0.1 * k
+        slam.update([x, 0.0, 0.0], cast_scan(x, 0.0, 0.0, 360, 8.0, segments, np.zeros((0, 3))))
+
+
+def run_slam_benchmark(
+    scenarios: Sequence[str] = DEFAULT_SCENARIOS,
+    steps: int = 3000,
+    seed: int = 0,
+    *,
+    config: SlamConfig | None = None,
+    progress: Callable[[str, int], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Benchmark onboard SLAM on each scenario; one row (dict) per scenario.
+
+    Parameters
+    ----------
+    scenarios : sequence of str
+        Scenario names (:func:`mrslam_env.worlds.build_world`).
+    steps : int
+        Env steps per run.
+    seed : int
+        Seeds the env and the policies (``default_rng([seed, i])`` for robot i).
+    config : SlamConfig, optional
+        SLAM settings (its ``mode`` is overridden: ``slam`` and ``odometry`` both run).
+    progress : callable (scenario, step) -> None, optional
+        Called every 100 steps.
+
+    Returns
+    -------
+    list of dict
+        Keys as in the module docstring, plus ``scenario``, ``steps``, ``seed`` and the
+        per-robot lists ``ate_slam_per_robot``, ``ate_odometry_per_robot``,
+        ``map_agreement_per_robot``, ``rejected_matches``.
+    """
+    if steps < 1:
+        raise ValueError(f"steps must be >= 1, got {steps}")
+    base = config if config is not None else SlamConfig()
+    slam_config = replace(base, mode="slam")
+    odometry_config = replace(base, mode="odometry")
+    warm_up(slam_config)
+    return [
+        _benchmark_scenario(name, steps, seed, slam_config, odometry_config, progress)
+        for name in scenarios
+    ]
+
+
+def _benchmark_scenario(
+    name: str,
+    steps: int,
+    seed: int,
+    slam_config: SlamConfig,
+    odometry_config: SlamConfig,
+    progress: Callable[[str, int], None] | None,
+) -> dict[str, Any]:
+    """One row of :func:`run_slam_benchmark`."""
+    world = build_world(name)
+    env = MultiRobotSlamEnv(scenario=world, seed=seed, config=EnvConfig(max_cycles=steps))
+    lidar = env.config.lidar
+    observations, infos = env.reset(seed=seed)
+    agents = list(env.possible_agents)
+    policies = {
+        agent: WanderPolicy(lidar.n_beams, np.random.default_rng([seed, i]))
+        for i, agent in enumerate(agents)
+    }
+    slams = {agent: RobotSlam(slam_config, lidar.n_beams, lidar.max_range) for agent in agents}
+    dead_reckoning = {
+        agent: RobotSlam(odometry_config, lidar.n_beams, lidar.max_range) for agent in agents
+    }
+    truth: dict[str, list[np.ndarray]] = {agent: [] for agent in agents}
+    update_seconds: list[float] = []
+    stepping = 0.0
+    for k in range(steps + 1):
+        if k > 0:
+            actions = {agent: policies[agent].act(observations[agent]["scan"]) for agent in agents}
+            started = time.perf_counter()
+            observations, _, _, _, infos = env.step(actions)
+        for agent in agents:
+            before = time.perf_counter()
+            slams[agent].update(observations[agent]["odom"], observations[agent]["scan"])
+            if k > 0:
+                update_seconds.append(time.perf_counter() - before)
+        if k > 0:
+            stepping += time.perf_counter() - started
+        for agent in agents:
+            dead_reckoning[agent].update(observations[agent]["odom"], observations[agent]["scan"])
+            truth[agent].append(infos[agent]["true_pose"])
+        if progress is not None and k > 0 and k % 100 == 0:
+            progress(name, k)
+    raster = ground_truth_map(world, slam_config.grid.resolution, margin=1.0)
+    ate_slam, ate_odometry, agreement = [], [], []
+    for agent in agents:
+        true_poses = np.array(truth[agent])
+        world_from_map = true_poses[0]
+        ate_slam.append(
+            absolute_trajectory_error(slams[agent].trajectory, true_poses, world_from_map)
+        )
+        ate_odometry.append(
+            absolute_trajectory_error(dead_reckoning[agent].trajectory, true_poses, world_from_map)
+        )
+        agreement.append(map_agreement(slams[agent].grid.to_gridmap(), world_from_map, raster))
+    mean_slam, mean_odometry = float(np.mean(ate_slam)), float(np.mean(ate_odometry))
+    return {
+        "scenario": name,
+        "steps": steps,
+        "seed": seed,
+        "ate_slam": mean_slam,
+        "ate_odometry": mean_odometry,
+        "ratio": mean_slam / mean_odometry if mean_odometry > 0 else math.nan,
+        "map_agreement": float(np.mean(agreement)),
+        "update_ms": 1e3 * statistics.median(update_seconds),
+        "update_mean_ms": 1e3 * statistics.fmean(update_seconds),
+        "steps_per_s": steps / stepping,
+        "ate_slam_per_robot": ate_slam,
+        "ate_odometry_per_robot": ate_odometry,
+        "map_agreement_per_robot": agreement,
+        "rejected_matches": [slams[agent].n_rejected for agent in agents],
+    }
+
+
+def format_slam_table(rows: Sequence[dict[str, Any]]) -> str:
+    """The benchmark rows as a fixed-width text table."""
+    header = (
+        f"{'scenario':<14}{'ATE slam m':>11}{'ATE odom m':>11}{'ratio':>7}"
+        f"{'agreement':>10}{'update ms':>10}{'mean ms':>9}{'steps/s':>9}"
+    )
+    lines = [header, "-" * len(header)]
+    for row in rows:
+        lines.append(
+            f"{row['scenario']:<14}{row['ate_slam']:>11.3f}{row['ate_odometry']:>11.3f}"
+            f"{row['ratio']:>7.3f}{row['map_agreement']:>10.4f}{row['update_ms']:>10.3f}"
+            f"{row['update_mean_ms']:>9.3f}{row['steps_per_s']:>9.0f}"
+        )
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    print(format_slam_table(run_slam_benchmark()))

@@ -1,0 +1,328 @@
+"""The growing log-odds grid (mrslam_env.slam.grid).
+
+Oracles: the integration kernel against a slow reference built on
+:func:`mrslam_env.slam.raycast.traverse` (itself tested against dense sampling); the
+incrementally kept likelihood fields against a from-scratch sum of their kernels; a box room
+mapped with true poses against the ground-truth raster.
+"""
+
+from __future__ import annotations
+
+import math
+from itertools import pairwise
+
+import numpy as np
+import pytest
+
+from mrslam_env.geometry import compose, inverse
+from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN
+from mrslam_env.sim.lidar import cast_scan
+from mrslam_env.sim.world import WorldSpec, box, ground_truth_map
+from mrslam_env.slam.config import GridConfig, SlamConfig
+from mrslam_env.slam.evaluation import map_agreement
+from mrslam_env.slam.grid import (
+    HIT_AVERAGE_CAP,
+    KERNEL_SCALE,
+    SECTORS,
+    SUBCELLS,
+    OccupancyGrid,
+    facing_sectors,
+    gaussian_kernels,
+    sector_of,
+)
+from mrslam_env.slam.raycast import traverse
+from mrslam_env.slam.scan import scan_normals
+from mrslam_env.slam.slam import RobotSlam
+
+NO_DISCS = np.zeros((0, 3))
+
+
+def box_room(width: float = 6.0, height: float = 4.0) -> WorldSpec:
+    """A closed room with 0.1 m walls and two pieces of furniture."""
+    t = 0.1
+    walls = [
+        box(-t, -t, width + t, 0.0),
+        box(-t, height, width + t, height + t),
+        box(-t, -t, 0.0, height + t),
+        box(width, -t, width + t, height + t),
+        box(1.0, 1.0, 1.6, 1.4),
+        box(4.2, 2.5, 4.6, 3.3),
+    ]
+    return WorldSpec.from_walls("box", walls, [[3.0, 2.0, 0.0]])
+
+
+def noisy_scan(world: WorldSpec, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    ranges = cast_scan(pose[0], pose[1], pose[2], 360, 8.0, world.segments, NO_DISCS)
+    noisy = np.clip(ranges + rng.normal(0.0, 0.01, ranges.shape), 0.0, 8.0)
+    return np.where(ranges < 8.0, noisy, 8.0)
+
+
+def fields_from_scratch(grid: OccupancyGrid) -> tuple[np.ndarray, np.ndarray]:
+    """The fields recomputed from each OCCUPIED cell's stamp index and sector mask."""
+    rows, cols = grid.shape
+    fine = np.zeros((SECTORS, rows, cols))
+    coarse = np.zeros((rows, cols))
+    for (iy, ix), q in zip(
+        np.argwhere(grid.stamp_index >= 0), grid.stamp_index[grid.stamp_index >= 0], strict=True
+    ):
+        for kernels, targets in (
+            (
+                grid.fine_kernels,
+                [fine[k] for k in range(SECTORS) if grid.sector_mask[iy, ix] >> k & 1],
+            ),
+            (grid.coarse_kernels, [coarse]),
+        ):
+            r = kernels.shape[1] // 2
+            for target in targets:
+                target[iy - r : iy + r + 1, ix - r : ix + r + 1] += kernels[q]
+    return fine, coarse
+
+
+def assert_fields_consistent(grid: OccupancyGrid) -> None:
+    occupied = grid.log_odds > grid.config.occupied_threshold
+    assert np.array_equal(grid.stamp_index >= 0, occupied)
+    assert np.all(grid.sector_mask[occupied] > 0)
+    fine, coarse = fields_from_scratch(grid)
+    np.testing.assert_array_equal(grid.fine_fields, fine)
+    np.testing.assert_array_equal(grid.coarse_field[0], coarse)
+
+
+# --- kernels and sectors ------------------------------------------------------------------
+
+
+def test_kernels_are_integer_gaussians_centred_on_their_subcell() -> None:
+    kernels, line_sum = gaussian_kernels(0.05, 0.05)
+    assert kernels.shape[0] == SUBCELLS**2
+    assert np.all(kernels == np.round(kernels)) and kernels.max() <= KERNEL_SCALE
+    radius = kernels.shape[1] // 2
+    offsets = np.arange(-radius, radius + 1)
+    for q in range(SUBCELLS**2):
+        weights = kernels[q].astype(np.float64)
+        centre_x = (weights.sum(axis=0) @ offsets) / weights.sum()
+        centre_y = (weights.sum(axis=1) @ offsets) / weights.sum()
+        expected = (np.array([q % SUBCELLS, q // SUBCELLS]) + 0.5) / SUBCELLS - 0.5
+        np.testing.assert_allclose([centre_x, centre_y], expected, atol=0.03)
+    # A straight wall (a long row of stamps) scores about 1 after dividing by line_sum.
+    row = sum(kernels[5][:, k] for k in range(kernels.shape[2]))
+    assert row.max() / line_sum == pytest.approx(1.0, abs=0.05)
+
+
+def test_sectors_overlap_by_a_quarter_sector_each_side() -> None:
+    assert sector_of(0.0) == 0 and sector_of(math.pi / 2) == 1 and sector_of(-math.pi / 2) == 3
+    assert sector_of(math.pi) == 2 and sector_of(-math.pi + 1e-9) == 2
+    assert facing_sectors(0.0) == 0b0001
+    assert facing_sectors(math.radians(30)) == 0b0011
+    assert facing_sectors(math.radians(-30)) == 0b1001
+    # Every facing counts in the sector the query for that same facing reads.
+    for direction in np.linspace(-7.0, 7.0, 1001):
+        assert facing_sectors(direction) >> sector_of(direction) & 1
+
+
+# --- integration against a slow reference ---------------------------------------------------
+
+
+def reference_integrate(
+    log_odds: np.ndarray,
+    hit_mean: np.ndarray,
+    hit_count: np.ndarray,
+    masks: np.ndarray,
+    origin: tuple[float, float],
+    resolution: float,
+    pose: np.ndarray,
+    ranges: np.ndarray,
+    normals: np.ndarray,
+    max_range: float,
+    config: GridConfig,
+) -> None:
+    """The documented update, beam by beam with plain Python and ``traverse``."""
+    x, y, heading = pose
+    n = len(ranges)
+    buffer = np.zeros((100_000, 2), dtype=np.int64)
+
+    def end_point(i: int, r: float) -> tuple[float, float, float]:
+        a = heading - math.pi + i * 2.0 * math.pi / n
+        return x + r * math.cos(a), y + r * math.sin(a), a
+
+    def cell_of(px: float, py: float) -> tuple[int, int]:
+        return math.floor((py - origin[1]) / resolution), math.floor((px - origin[0]) / resolution)
+
+    returned = (ranges >= config.min_range) & (ranges < max_range)
+    hit_cells = {cell_of(*end_point(i, ranges[i])[:2]) for i in np.flatnonzero(returned)}
+    clear = min(config.no_return_clear_distance, max_range)
+    for i in range(n):
+        if ranges[i] < config.min_range:
+            continue
+        length = ranges[i] if returned[i] else clear
+        ex, ey, _ = end_point(i, length)
+        count = traverse(x, y, ex, ey, origin[0], origin[1], resolution, buffer)
+        for iy, ix in buffer[:count]:
+            if (iy, ix) in hit_cells or (
+                not returned[i] and log_odds[iy, ix] > config.occupied_threshold
+            ):
+                if returned[i]:
+                    continue
+                break
+            log_odds[iy, ix] = np.float32(
+                min(max(float(log_odds[iy, ix]) + config.log_odds_miss, config.log_odds_min),
+                    config.log_odds_max)
+            )  # fmt: skip
+            if log_odds[iy, ix] <= config.occupied_threshold:
+                if masks[iy, ix]:
+                    hit_count[iy, ix] = 0
+                masks[iy, ix] = 0
+    for i in np.flatnonzero(returned):
+        ex, ey, a = end_point(i, ranges[i])
+        iy, ix = cell_of(ex, ey)
+        hit_count[iy, ix] = min(hit_count[iy, ix] + 1, HIT_AVERAGE_CAP)
+        offset = np.array([(ex - origin[0]) / resolution - ix, (ey - origin[1]) / resolution - iy])
+        hit_mean[iy, ix] += ((offset - hit_mean[iy, ix]) / hit_count[iy, ix]).astype(np.float32)
+        log_odds[iy, ix] = np.float32(
+            min(float(log_odds[iy, ix]) + config.log_odds_hit, config.log_odds_max)
+        )
+        if log_odds[iy, ix] > config.occupied_threshold:
+            facing = (
+                heading + math.atan2(normals[i, 1], normals[i, 0])
+                if normals[i].any()
+                else a + math.pi
+            )
+            masks[iy, ix] |= facing_sectors(facing)
+
+
+def test_integration_matches_the_slow_reference() -> None:
+    rng = np.random.default_rng(1)
+    world = box_room()
+    config = GridConfig(no_return_clear_distance=2.5)
+    grid = OccupancyGrid(config)
+    grid.ensure_contains(-3.0, -3.0, 9.0, 7.0)
+    log_odds = grid.log_odds.copy()
+    hit_mean = grid._hit_mean.copy()
+    hit_count = grid._hit_count.copy()
+    masks = grid.sector_mask.copy()
+    for step in range(25):
+        pose = np.array([rng.uniform(0.5, 5.5), rng.uniform(0.5, 3.5), rng.uniform(-4, 4)])
+        if world.clearance(pose[:2])[0] < 0.3:
+            continue
+        ranges = noisy_scan(world, pose, rng)
+        ranges[rng.random(360) < 0.05] = 8.0  # dropouts: no-return beams inside the room
+        ranges[rng.random(360) < 0.02] = 0.01  # below min_range: skipped
+        normals = scan_normals(ranges, 8.0, config.min_range)
+        reference_integrate(
+            log_odds, hit_mean, hit_count, masks, grid.origin, grid.resolution, pose, ranges,
+            normals, 8.0, config,
+        )  # fmt: skip
+        grid.integrate_scan(pose, ranges, 8.0, normals)
+        assert grid.shape == log_odds.shape, "the room fits: no growth expected"
+        np.testing.assert_array_equal(grid.log_odds, log_odds, err_msg=f"step {step}")
+        np.testing.assert_allclose(grid._hit_mean, hit_mean, atol=1e-6)
+        np.testing.assert_array_equal(grid._hit_count, hit_count)
+        np.testing.assert_array_equal(grid.sector_mask, masks)
+        expected_index = np.where(
+            log_odds > config.occupied_threshold,
+            np.minimum((hit_mean[..., 1] * SUBCELLS).astype(int), SUBCELLS - 1) * SUBCELLS
+            + np.minimum((hit_mean[..., 0] * SUBCELLS).astype(int), SUBCELLS - 1),
+            -1,
+        )
+        np.testing.assert_array_equal(grid.stamp_index, expected_index)
+    assert_fields_consistent(grid)
+    assert (grid.log_odds > 0.5).sum() > 300 and (grid.log_odds < -0.5).sum() > 5000
+
+
+def test_beams_without_return_clear_only_so_far_and_stop_at_walls() -> None:
+    grid = OccupancyGrid(GridConfig(no_return_clear_distance=2.0))
+    wall = np.full(360, 8.0)
+    wall[180] = 1.0  # beam 180 points straight ahead (heading 0): a wall at x = 1 m
+    for _ in range(3):
+        grid.integrate_scan([0.025, 0.025, 0.0], wall, 8.0)
+    iy, ix = grid.world_to_cell([1.02, 0.025])
+    assert grid.log_odds[iy, ix] > 0.5
+    # Now nothing returns (a dropout): the beam ahead clears up to the wall, not past it.
+    grid.integrate_scan([0.025, 0.025, 0.0], np.full(360, 8.0), 8.0)
+    assert grid.log_odds[iy, ix] > 0.5
+    iy, ix = grid.world_to_cell([-1.5, 0.025])  # behind the robot, within 2 m: cleared
+    assert grid.log_odds[iy, ix] < 0.0
+    iy, ix = grid.world_to_cell([-2.5, 0.025])  # beyond the clearing distance: untouched
+    assert grid.log_odds[iy, ix] == 0.0
+
+
+# --- clamping, growth, trinary view -----------------------------------------------------------
+
+
+def test_log_odds_stay_clamped() -> None:
+    rng = np.random.default_rng(2)
+    world = box_room()
+    config = GridConfig(log_odds_min=-1.5, log_odds_max=2.0)
+    grid = OccupancyGrid(config)
+    pose = np.array([3.0, 2.0, 0.3])
+    for _ in range(60):
+        grid.integrate_scan(pose, noisy_scan(world, pose, rng), 8.0)
+    values = grid.log_odds
+    assert values.min() == pytest.approx(-1.5) and values.max() == pytest.approx(2.0)
+    assert np.all((values >= np.float32(-1.5)) & (values <= np.float32(2.0)))
+    assert_fields_consistent(grid)
+
+
+@pytest.mark.parametrize("direction", [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (-1, -1)])
+def test_the_grid_grows_without_moving_cells(direction: tuple[int, int]) -> None:
+    rng = np.random.default_rng(3)
+    world = box_room()
+    grid = OccupancyGrid(GridConfig(growth_chunk=16))
+    pose = np.array([3.0, 2.0, 0.0])
+    in_map = compose(inverse(pose), pose)  # the map frame is the first pose
+    grid.integrate_scan(in_map, noisy_scan(world, pose, rng), 8.0)
+    occupied = np.argwhere(grid.occupied())
+    before_world = grid.cell_to_world(occupied)
+    before_values = grid.log_odds[grid.occupied()].copy()
+    shape = grid.shape
+    far = 20.0 * np.array(direction, dtype=np.float64)
+    assert grid.ensure_contains(far[0] - 0.1, far[1] - 0.1, far[0] + 0.1, far[1] + 0.1)
+    assert grid.ensure_contains(far[0], far[1], far[0], far[1]) is False
+    rows, cols = grid.shape
+    assert rows >= shape[0] and cols >= shape[1] and (rows, cols) != shape
+    assert rows % 16 == 0 and cols % 16 == 0
+    for value in grid.origin:  # the origin stays on the lattice through the map origin
+        assert value / grid.resolution == pytest.approx(round(value / grid.resolution), abs=1e-9)
+    # The same world points hold the same values, and the far box is inside.
+    cells = grid.world_to_cell(before_world)
+    np.testing.assert_array_equal(grid.log_odds[cells[:, 0], cells[:, 1]], before_values)
+    np.testing.assert_allclose(grid.cell_to_world(cells), before_world, atol=1e-9)
+    assert grid.occupied().sum() == len(occupied)
+    far_cell = grid.world_to_cell(far)
+    assert 0 <= far_cell[0] < rows and 0 <= far_cell[1] < cols
+    assert_fields_consistent(grid)
+    # Integration still works after growing.
+    grid.integrate_scan(in_map, noisy_scan(world, pose, rng), 8.0)
+    assert_fields_consistent(grid)
+
+
+def test_to_gridmap_is_the_trinary_view() -> None:
+    grid = OccupancyGrid()
+    grid._log_odds[3, 4] = 2.0
+    grid._log_odds[5, 6] = -1.0
+    grid._log_odds[7, 8] = 0.2
+    gridmap = grid.to_gridmap()
+    assert gridmap.cells[3, 4] == OCCUPIED and gridmap.cells[5, 6] == FREE
+    assert gridmap.cells[7, 8] == UNKNOWN and gridmap.cells[0, 0] == UNKNOWN
+    assert gridmap.origin == grid.origin and gridmap.resolution == grid.resolution
+    with pytest.raises(ValueError):
+        grid.log_odds[0, 0] = 1.0  # read-only view
+
+
+def test_box_room_mapped_with_true_poses_matches_the_ground_truth() -> None:
+    rng = np.random.default_rng(4)
+    world = box_room()
+    # A start pose off the lattice and at an angle: the map is rotated against the world.
+    start = np.array([2.37, 1.81, 0.43])
+    slam = RobotSlam(SlamConfig(mode="ground_truth"), 360, 8.0)
+    waypoints = [start, [4.9, 1.2, 1.2], [5.2, 3.3, 2.8], [2.6, 3.2, -2.4], [0.6, 2.2, -1.0]]
+    path = np.concatenate(
+        [np.linspace(a, b, 25, endpoint=False) for a, b in pairwise(np.asarray(waypoints))]
+    )
+    for pose in path:
+        in_map = compose(inverse(start), pose)
+        slam.update(in_map, noisy_scan(world, pose, rng), in_map)
+    raster = ground_truth_map(world, 0.05, margin=1.0)
+    gridmap = slam.grid.to_gridmap()
+    assert (gridmap.cells == OCCUPIED).sum() > 500 and (gridmap.cells == FREE).sum() > 5000
+    assert map_agreement(gridmap, start, raster) >= 0.97
+    # The same map placed wrongly (a 0.3 m shift) must not pass: the check can fail.
+    assert map_agreement(gridmap, start + np.array([0.3, 0.0, 0.0]), raster) < 0.96
