@@ -3,6 +3,7 @@
 ``mrslam run``                 the end-to-end experiment on the default scenario
 ``mrslam scenarios``           list worlds; ``--export NAME OUT.yaml`` writes a floor plan
 ``mrslam bench sim``           simulator speed, side by side with IR-SIM
+``mrslam bench slam``          onboard SLAM accuracy (ATE, map agreement) and speed
 
 Errors in what the user gave (unknown scenario, unreadable map, bad values) print one line
 ``mrslam: error: ...`` and exit with status 2.
@@ -61,6 +62,11 @@ def _build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--repeats", type=int, default=3)
     sim.add_argument("--no-irsim", action="store_true", help="skip the IR-SIM comparison")
     sim.add_argument("--json", action="store_true")
+    slam = kinds.add_parser("slam", help="onboard SLAM: ATE against odometry, map agreement, speed")
+    slam.add_argument("--scenarios", nargs="*", help="scenario names (default: the built-in five)")
+    slam.add_argument("--steps", type=int, default=3000, help="env steps per run (default 3000)")
+    slam.add_argument("--seed", type=int, default=0)
+    slam.add_argument("--json", action="store_true")
     return parser
 
 
@@ -119,6 +125,8 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
+    if args.bench == "slam":
+        return _cmd_bench_slam(args)
     from mrslam_env.worlds import available_scenarios, build_world
     from scenarios.bench import bench_sim
 
@@ -137,6 +145,22 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         theirs = "-" if row.irsim_steps_per_s is None else f"{row.irsim_steps_per_s:10.0f}"
         ratio = "-" if row.ratio is None else f"{row.ratio:6.1f}x"
         print(f"{row.scenario:<14} {row.mrslam_steps_per_s:>10.0f} {theirs:>10} {ratio:>7}")
+    return 0
+
+
+def _cmd_bench_slam(args: argparse.Namespace) -> int:
+    from scenarios.bench_slam import (
+        DEFAULT_SCENARIOS,
+        format_slam_table,
+        run_slam_benchmark,
+        warm_up,
+    )
+
+    if args.steps < 1:
+        raise ValueError(f"--steps must be >= 1, got {args.steps}")
+    warm_up()  # compile/load the numba kernels before anything is timed
+    rows = run_slam_benchmark(args.scenarios or DEFAULT_SCENARIOS, args.steps, args.seed)
+    print(json.dumps(rows, indent=2) if args.json else format_slam_table(rows))
     return 0
 
 

@@ -139,3 +139,22 @@ def test_console_script_is_installed(tmp_path: Path) -> None:
     done = subprocess.run([executable, "run", "--scenario", "x"], capture_output=True, text=True)
     assert done.returncode == 2
     assert done.stderr.startswith("mrslam: error: unknown scenario 'x'")
+
+
+def test_bench_slam_json_rows(capsys) -> None:
+    status, out, _ = run_cli(
+        capsys, "bench", "slam", "--scenarios", "office", "--steps", "200", "--json"
+    )
+    assert status == 0
+    (row,) = json.loads(out)
+    assert row["scenario"] == "office" and row["steps"] == 200
+    # A short seeded run: SLAM already far better than dead reckoning, map consistent.
+    assert row["ate_slam"] < 0.05
+    assert row["ate_slam"] < row["ate_odometry"] / 3
+    assert row["map_agreement"] >= 0.97
+    assert row["steps_per_s"] > 0
+
+
+def test_bench_slam_rejects_bad_steps(capsys) -> None:
+    status, _, err = run_cli(capsys, "bench", "slam", "--steps", "0")
+    assert status == 2 and "--steps must be >= 1" in err
