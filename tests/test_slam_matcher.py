@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 import pytest
+from slam_worlds import NO_DISCS, corridor_world, noisy_scan
 
 from mrslam_env.geometry import compose, wrap_scalar
 from mrslam_env.sim.lidar import cast_scan
@@ -32,8 +33,6 @@ from mrslam_env.slam.matcher import (
 )
 from mrslam_env.slam.scan import NORMAL_HALF_WIDTH, NORMAL_MAX_GAP, scan_normals, scan_points
 
-NO_DISCS = np.zeros((0, 3))
-
 
 def room_world() -> WorldSpec:
     """An L-shaped room with furniture: every direction is constrained."""
@@ -50,18 +49,6 @@ def room_world() -> WorldSpec:
         box(2.5, 3.6, 3.2, 4.0),
     ]
     return WorldSpec.from_walls("room", walls, [[2.0, 2.0, 0.0]])
-
-
-def corridor_world() -> WorldSpec:
-    """Two parallel walls 60 m long and 2 m apart: from the middle, no end is in range."""
-    walls = [box(-30.0, -1.1, 30.0, -1.0), box(-30.0, 1.0, 30.0, 1.1)]
-    return WorldSpec.from_walls("corridor", walls, [[0.0, 0.0, 0.0]])
-
-
-def noisy_scan(world: WorldSpec, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    ranges = cast_scan(pose[0], pose[1], pose[2], 360, 8.0, world.segments, NO_DISCS)
-    noisy = np.clip(ranges + rng.normal(0.0, 0.01, ranges.shape), 0.0, 8.0)
-    return np.where(ranges < 8.0, noisy, 8.0)
 
 
 def mapped(world: WorldSpec, poses: list[np.ndarray], rng: np.random.Generator) -> OccupancyGrid:

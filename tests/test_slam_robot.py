@@ -10,11 +10,11 @@ import sys
 
 import numpy as np
 import pytest
+from slam_worlds import corridor_world, noisy_scan
 
 from mrslam_env.config import OdometryConfig
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import GridMap
-from mrslam_env.sim.lidar import cast_scan
 from mrslam_env.sim.sensors import (
     apply_odometry_increments,
     odometry_increments,
@@ -24,8 +24,6 @@ from mrslam_env.sim.world import WorldSpec, box, ground_truth_map
 from mrslam_env.slam.config import SlamConfig
 from mrslam_env.slam.evaluation import absolute_trajectory_error, map_agreement
 from mrslam_env.slam.slam import RobotSlam
-
-NO_DISCS = np.zeros((0, 3))
 
 
 def room_world() -> WorldSpec:
@@ -39,17 +37,6 @@ def room_world() -> WorldSpec:
         box(6.5, 0.8, 6.9, 1.6),
     ]
     return WorldSpec.from_walls("room", walls, [[1.5, 1.0, 0.0]])
-
-
-def corridor_world() -> WorldSpec:
-    walls = [box(-30.0, -1.1, 30.0, -1.0), box(-30.0, 1.0, 30.0, 1.1)]
-    return WorldSpec.from_walls("corridor", walls, [[0.0, 0.0, 0.0]])
-
-
-def noisy_scan(world: WorldSpec, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    ranges = cast_scan(pose[0], pose[1], pose[2], 360, 8.0, world.segments, NO_DISCS)
-    noisy = np.clip(ranges + rng.normal(0.0, 0.01, ranges.shape), 0.0, 8.0)
-    return np.where(ranges < 8.0, noisy, 8.0)
 
 
 def loop_path(n_steps: int) -> np.ndarray:
