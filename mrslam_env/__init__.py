@@ -17,7 +17,9 @@ ENV_ID = "mrslam/MultiRobotSlam-v0"
 
 def __getattr__(name: str) -> Any:
     if name in ("parallel_env", "env", "MultiRobotSlamEnv"):
-        from mrslam_env import env as _env_module
+        import importlib
 
-        return getattr(_env_module, name)
+        # Not ``from mrslam_env import env``: that looks the name up on this package
+        # first, which would call this function again.
+        return getattr(importlib.import_module("mrslam_env.env"), name)
     raise AttributeError(f"module 'mrslam_env' has no attribute {name!r}")

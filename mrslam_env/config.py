@@ -10,10 +10,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 
+from mrslam_env.slam.config import SlamConfig
+
 __all__ = [
     "CommConfig",
     "EnvConfig",
     "LidarConfig",
+    "LocalMapConfig",
     "OdometryConfig",
     "PeerSensorConfig",
     "RewardConfig",
@@ -163,7 +166,9 @@ class RewardConfig:
     collision_penalty: float = 1.0
     """Subtracted on each step in which the robot touches a wall or another robot."""
     coverage_resolution: float = 0.2
-    """Cell size (m) of the grid on which newly observed area is counted."""
+    """Cell size (m) of the world-frame grid on which the area a robot has seen is
+    counted from its true poses (for ``EnvConfig.slam = None``, and for the env's
+    ``observable_area``)."""
 
     def __post_init__(self) -> None:
         _check_all(
@@ -171,6 +176,22 @@ class RewardConfig:
             non_negative=("area_weight", "collision_penalty"),
             positive=("coverage_resolution",),
         )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LocalMapConfig:
+    """The ``local_map`` observation: an egocentric crop of the robot's own map
+    (:mod:`mrslam_env.slam.local_map`)."""
+
+    cells: int = 64
+    """Side of the square crop, cells."""
+    cell_size: float = 0.1
+    """Edge of one crop cell, m (the default crop spans 6.4 m)."""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.cells, int) or isinstance(self.cells, bool) or self.cells < 1:
+            raise ValueError(f"LocalMapConfig.cells must be an int >= 1, got {self.cells!r}")
+        _check_all(self, positive=("cell_size",))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -183,6 +204,11 @@ class EnvConfig:
     peer: PeerSensorConfig = field(default_factory=PeerSensorConfig)
     comm: CommConfig = field(default_factory=CommConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
+    slam: SlamConfig | None = field(default_factory=SlamConfig)
+    """Each robot's onboard SLAM (mode ``slam``, ``odometry`` or ``ground_truth``). ``None``
+    turns onboard SLAM off: no ``pose`` or ``local_map`` observations, and the reward
+    counts area seen from the true poses (the raw simulator, for speed)."""
+    local_map: LocalMapConfig = field(default_factory=LocalMapConfig)
     dt: float = 0.1
     """Env step (control and sensor period), s."""
     physics_substeps: int = 2

@@ -38,13 +38,28 @@ peer        Box((n-1, 4), f64)     per other robot (index order, self skipped):
                                    rad)``; zeros when not detected (out of
                                    ``detect_range`` or no line of sight)
 comm        MultiBinary(n-1)       1 when the link to that robot is up this step
+pose        Box((3,), f64)         the robot's onboard-SLAM pose ``(x, y, theta)`` in its
+                                   own map frame (origin = its start pose)
+local_map   Box(0, 1, (2, S, S),   egocentric crop of the robot's own map, centred on it
+            uint8)                 and turned with it (it looks along +x = increasing
+                                   column; row 0 = lowest local y); channel 0 = free,
+                                   channel 1 = occupied, both 0 = unknown;
+                                   ``S = local_map.cells`` (64) of ``cell_size`` (0.1 m)
 ==========  =====================  =======================================================
+
+``pose`` and ``local_map`` exist when onboard SLAM is on (``config.slam``, the default).
+Each robot runs :class:`~mrslam_env.slam.slam.RobotSlam` on its own ``odom`` and ``scan``
+(mode ``slam``, ``odometry`` or ``ground_truth`` per ``config.slam.mode``);
+``env.unwrapped.robot_map(agent)`` returns its current map (a
+:class:`~mrslam_env.gridmap.GridMap` in its map frame) and ``robot_slam(agent)`` the SLAM
+object itself (trajectory, grid).
 
 Rewards
 -------
-``area_weight *`` the area (m²) this robot's scan observed for the first time this step
-(counted on a world-frame grid of ``coverage_resolution``) ``- collision_penalty`` on steps
-with a contact.
+``area_weight *`` the area (m²) that became known (FREE or OCCUPIED) in the robot's own map
+this step ``- collision_penalty`` on steps with a contact. With ``config.slam = None`` the
+area is what the robot's scan observed for the first time from its true pose, counted on a
+world-frame grid of ``coverage_resolution``.
 
 Episode end
 -----------
@@ -53,7 +68,8 @@ No termination; truncation of all robots after ``config.max_cycles`` steps.
 Infos (per robot)
 -----------------
 ``true_pose`` (3,) world-frame pose: **privileged**, for evaluation only, never for a
-policy that claims not to know it; ``collision`` (bool); ``observed_area`` (m², so far).
+policy that claims not to know it; ``collision`` (bool); ``observed_area`` (m², so far:
+the known area of the robot's map, or with SLAM off the area seen from the true poses).
 
 Arguments
 ---------
@@ -71,7 +87,8 @@ physics space the same way; the original's next steps are unchanged otherwise.)
 
 Version history
 ---------------
-* v0: initial release.
+* v0: initial release; onboard SLAM (``pose``, ``local_map``, map-based reward) added
+  before the first tagged version.
 """
 
 from __future__ import annotations
@@ -91,10 +108,13 @@ from scipy import ndimage
 
 from mrslam_env import ENV_ID
 from mrslam_env.config import EnvConfig
+from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import GridMap
 from mrslam_env.sim.simulator import SimState, Simulator
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
+from mrslam_env.slam.local_map import local_map
 from mrslam_env.slam.raycast import mark_scan_observed
+from mrslam_env.slam.slam import RobotSlam
 from mrslam_env.worlds import build_world
 
 __all__ = ["MultiRobotSlamEnv", "env", "parallel_env"]
@@ -141,6 +161,7 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         )
         self.np_random, self.np_random_seed = seeding.np_random(seed)
         self._sim: Simulator | None = None
+        self._slams: list[RobotSlam] = []
         self._render_base: NDArray[np.uint8] | None = None
 
     # --- spaces -------------------------------------------------------------------------
@@ -150,20 +171,24 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         lidar, peer = self.config.lidar, self.config.peer
         others = len(self.possible_agents) - 1
         inf = np.inf
-        return spaces.Dict(
-            {
-                "scan": spaces.Box(0.0, lidar.max_range, (lidar.n_beams,), np.float32),
-                "odom": spaces.Box(
-                    np.array([-inf, -inf, -np.pi]), np.array([inf, inf, np.pi]), dtype=np.float64
-                ),
-                "peer": spaces.Box(
-                    np.tile([0.0, 0.0, -np.pi, -np.pi], (others, 1)),
-                    np.tile([1.0, peer.detect_range, np.pi, np.pi], (others, 1)),
-                    dtype=np.float64,
-                ),
-                "comm": spaces.MultiBinary(others),
-            }
+        planar_pose = spaces.Box(
+            np.array([-inf, -inf, -np.pi]), np.array([inf, inf, np.pi]), dtype=np.float64
         )
+        entries: dict[str, spaces.Space[Any]] = {
+            "scan": spaces.Box(0.0, lidar.max_range, (lidar.n_beams,), np.float32),
+            "odom": planar_pose,
+            "peer": spaces.Box(
+                np.tile([0.0, 0.0, -np.pi, -np.pi], (others, 1)),
+                np.tile([1.0, peer.detect_range, np.pi, np.pi], (others, 1)),
+                dtype=np.float64,
+            ),
+            "comm": spaces.MultiBinary(others),
+        }
+        if self.config.slam is not None:
+            side = self.config.local_map.cells
+            entries["pose"] = planar_pose
+            entries["local_map"] = spaces.Box(0, 1, (2, side, side), np.uint8)
+        return spaces.Dict(entries)
 
     @functools.cache  # noqa: B019
     def action_space(self, agent: AgentID) -> spaces.Box:
@@ -188,6 +213,13 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         self._observed_area = np.zeros(len(self.possible_agents))
         self.steps = 0
         state = self._sim.state
+        self._slams = []  # a fresh map for every robot
+        if self.config.slam is not None:
+            lidar = self.config.lidar
+            self._slams = [
+                RobotSlam(self.config.slam, lidar.n_beams, lidar.max_range)
+                for _ in self.possible_agents
+            ]
         self._count_new_area(state)
         return self._observations(state), self._infos(state)
 
@@ -243,6 +275,9 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         return commands
 
     def _count_new_area(self, state: SimState) -> NDArray[np.float64]:
+        """Update what each robot has seen; the area (m²) it saw for the first time."""
+        if self._slams:
+            return self._update_slam(state)
         grid = self._coverage_template
         new_cells = np.array(
             [
@@ -264,17 +299,42 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         self._observed_area += area
         return area
 
+    def _update_slam(self, state: SimState) -> NDArray[np.float64]:
+        """One SLAM update per robot; the growth of each robot's mapped area (m²)."""
+        assert self._sim is not None
+        ground_truth = self.config.slam is not None and self.config.slam.mode == "ground_truth"
+        area = np.zeros(len(self._slams))
+        for i, slam in enumerate(self._slams):
+            grid = slam.grid
+            known_before = grid.known_cells
+            true_pose_in_map = None
+            if ground_truth:
+                true_pose_in_map = compose(inverse(self._sim.starts[i]), state.true_poses[i])
+            slam.update(state.odometry[i], state.scans[i], true_pose_in_map)
+            area[i] = (grid.known_cells - known_before) * grid.resolution**2
+            self._observed_area[i] = grid.known_cells * grid.resolution**2
+        return area
+
     def _observations(self, state: SimState) -> dict[AgentID, ObsDict]:
-        return {
-            agent: {
+        observations: dict[AgentID, ObsDict] = {}
+        crop = self.config.local_map
+        for i, agent in enumerate(self.possible_agents):
+            if agent not in self.agents:
+                continue
+            observation = {
                 "scan": state.scans[i].astype(np.float32),
                 "odom": state.odometry[i].copy(),
                 "peer": state.peers[i].copy(),
                 "comm": state.comm[i].astype(np.int8),
             }
-            for i, agent in enumerate(self.possible_agents)
-            if agent in self.agents
-        }
+            if self._slams:
+                slam = self._slams[i]
+                observation["pose"] = slam.pose
+                observation["local_map"] = local_map(
+                    slam.grid, slam.pose, crop.cells, crop.cell_size
+                )
+            observations[agent] = observation
+        return observations
 
     def _infos(self, state: SimState) -> dict[AgentID, dict[str, Any]]:
         return {
@@ -288,6 +348,22 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         }
 
     # --- access for agents, evaluation and recording ---------------------------------------
+
+    def robot_slam(self, agent: AgentID) -> RobotSlam:
+        """The onboard SLAM of ``agent`` (its grid, pose and trajectory in its map frame);
+        read it, do not update it."""
+        if self._sim is None:
+            raise RuntimeError("the environment has not been reset yet")
+        if not self._slams:
+            raise RuntimeError("onboard SLAM is off (EnvConfig.slam is None)")
+        if agent not in self.possible_agents:
+            raise ValueError(f"unknown agent {agent!r}; agents are {self.possible_agents}")
+        return self._slams[self.possible_agents.index(agent)]
+
+    def robot_map(self, agent: AgentID) -> GridMap:
+        """``agent``'s current map: the trinary view of its SLAM grid, in its map frame
+        (its start pose)."""
+        return self.robot_slam(agent).grid.to_gridmap()
 
     @property
     def observable_area(self) -> float:

@@ -13,7 +13,9 @@ All spatial data is in metres. Robots are numbered from 0 (``robot_0``, ``robot_
 ``world/walls``                static wall outlines, ``LineStrips2D`` of the lidar segments
 ``world/robot_i/true_pose``    ground-truth pose: heading arrow + footprint circle
 ``world/robot_i/scan``         lidar hits in the world frame (``Points2D``)
-``robot_i/...``                robot i's own map frame: ``map``, ``pose``, ``path``...
+``robot_i/map``                robot i's own map (``rr.GridMap``) in its map frame
+``robot_i/pose``               its SLAM pose there: heading arrow + footprint circle
+``robot_i/path``               its SLAM trajectory there (``LineStrips2D``)
 ``merge/...``                  merge stages; ``rendezvous/...``; ``team/...``
 ``metrics/<name>``             ``Scalars``
 ``events``                     ``TextLog`` of everything the team decides
@@ -328,29 +330,29 @@ class Recorder:
         """
         self._check_open()
         self._check_robot(robot)
-        pose = _as_pose(pose_xytheta, "pose_xytheta")
-        if not (radius > 0 and math.isfinite(radius)):
-            raise ValueError(f"radius must be a finite number > 0 m, got {radius}")
-        centre = pose[None, :2]
-        heading = radius * np.array([[math.cos(pose[2]), math.sin(pose[2])]])
-        colour = robot_colour(robot)
+        self._log_pose(f"world/{robot_entity(robot)}/true_pose", robot, pose_xytheta, radius)
+
+    def log_robot_pose(self, robot: int, pose_in_map: ArrayLike, radius: float = 0.2) -> None:
+        """Log ``robot_i/pose``: the robot's SLAM pose in its own map frame (arrow and
+        footprint), drawn over ``robot_i/map``."""
+        self._check_open()
+        self._check_robot(robot)
+        self._log_pose(f"{robot_entity(robot)}/pose", robot, pose_in_map, radius)
+
+    def log_robot_path(self, robot: int, poses_in_map: ArrayLike) -> None:
+        """Log ``robot_i/path``: the robot's trajectory (T, 3) or (T, 2) in its map frame."""
+        self._check_open()
+        self._check_robot(robot)
+        path = np.asarray(poses_in_map, dtype=np.float64)
+        if path.ndim != 2 or path.shape[1] not in (2, 3) or not np.all(np.isfinite(path)):
+            raise ValueError(f"poses_in_map must be finite, shape (T, 2|3), got {path.shape}")
         self._stream.log(
-            f"world/{robot_entity(robot)}/true_pose",
-            rr.Arrows2D(
-                origins=centre,
-                vectors=heading,
-                radii=0.03,
-                colors=colour,
-                labels=robot_entity(robot),
-                show_labels=False,
-                draw_order=_DRAW_ORDER_POSE,
-            ),
-            rr.Ellipses2D(
-                centers=centre,
-                half_sizes=[[radius, radius]],
-                line_radii=0.02,
-                colors=colour,
-                draw_order=_DRAW_ORDER_POSE,
+            f"{robot_entity(robot)}/path",
+            rr.LineStrips2D(
+                [path[:, :2]],
+                radii=0.02,
+                colors=robot_colour(robot),
+                draw_order=_DRAW_ORDER_SCAN,
             ),
         )
 
@@ -495,6 +497,33 @@ class Recorder:
                 draw_order=draw_order,
             ),
             static=static,
+        )
+
+    def _log_pose(self, entity: str, robot: int, pose_xytheta: ArrayLike, radius: float) -> None:
+        pose = _as_pose(pose_xytheta, "pose")
+        if not (radius > 0 and math.isfinite(radius)):
+            raise ValueError(f"radius must be a finite number > 0 m, got {radius}")
+        centre = pose[None, :2]
+        heading = radius * np.array([[math.cos(pose[2]), math.sin(pose[2])]])
+        colour = robot_colour(robot)
+        self._stream.log(
+            entity,
+            rr.Arrows2D(
+                origins=centre,
+                vectors=heading,
+                radii=0.03,
+                colors=colour,
+                labels=robot_entity(robot),
+                show_labels=False,
+                draw_order=_DRAW_ORDER_POSE,
+            ),
+            rr.Ellipses2D(
+                centers=centre,
+                half_sizes=[[radius, radius]],
+                line_radii=0.02,
+                colors=colour,
+                draw_order=_DRAW_ORDER_POSE,
+            ),
         )
 
     def _declare_y_up(self, root: str) -> None:

@@ -1,7 +1,8 @@
 """Benchmarks behind ``mrslam bench``: medians over repeats, side by side with a peer.
 
 ``mrslam bench sim`` times env steps (two robots with 360-beam lidars, random-ish driving)
-on every scenario, and the same work in IR-SIM in the same run.
+on every scenario, with onboard SLAM off (the simulator alone) and on, and the simulator's
+work in IR-SIM in the same run.
 """
 
 from __future__ import annotations
@@ -23,9 +24,12 @@ __all__ = ["SimBenchRow", "bench_sim", "driving_commands", "env_steps_per_second
 @dataclass(frozen=True, slots=True)
 class SimBenchRow:
     scenario: str
-    slam: bool
     mrslam_steps_per_s: float
+    """Env steps/s with onboard SLAM off (``EnvConfig.slam = None``): the simulator alone,
+    the work IR-SIM does."""
     irsim_steps_per_s: float | None
+    with_slam_steps_per_s: float | None = None
+    """Env steps/s with onboard SLAM on for both robots (the env's default)."""
 
     @property
     def ratio(self) -> float | None:
@@ -36,8 +40,10 @@ class SimBenchRow:
     def as_dict(self) -> dict[str, object]:
         return {
             "scenario": self.scenario,
-            "slam": self.slam,
             "mrslam_steps_per_s": round(self.mrslam_steps_per_s, 1),
+            "with_slam_steps_per_s": None
+            if self.with_slam_steps_per_s is None
+            else round(self.with_slam_steps_per_s, 1),
             "irsim_steps_per_s": None
             if self.irsim_steps_per_s is None
             else round(self.irsim_steps_per_s, 1),
@@ -80,14 +86,18 @@ def env_steps_per_second(
 def bench_sim(
     worlds: dict[str, WorldSpec], *, n_steps: int = 1000, repeats: int = 3, irsim: bool = True
 ) -> list[SimBenchRow]:
-    """One row per world: our env steps/s and, if ``irsim``, IR-SIM's on the same world."""
+    """One row per world: our env steps/s without and with onboard SLAM and, if ``irsim``,
+    IR-SIM's on the same world."""
     rows = []
     for name, world in worlds.items():
-        ours = env_steps_per_second(world, n_steps=n_steps, repeats=repeats)
+        ours = env_steps_per_second(
+            world, n_steps=n_steps, repeats=repeats, config=EnvConfig(slam=None)
+        )
+        with_slam = env_steps_per_second(world, n_steps=n_steps, repeats=repeats)
         theirs = None
         if irsim:
             from scenarios.bench_irsim import irsim_steps_per_second
 
             theirs = irsim_steps_per_second(world, n_steps=max(n_steps // 5, 50), repeats=repeats)
-        rows.append(SimBenchRow(name, False, ours, theirs))
+        rows.append(SimBenchRow(name, ours, theirs, with_slam))
     return rows

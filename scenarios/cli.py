@@ -4,6 +4,8 @@
 ``mrslam scenarios``           list worlds; ``--export NAME OUT.yaml`` writes a floor plan
 ``mrslam bench sim``           simulator speed, side by side with IR-SIM
 ``mrslam bench slam``          onboard SLAM accuracy (ATE, map agreement) and speed
+``mrslam bench merge``         map merging: our pipeline against the random walk alone and
+                               the ROS map_merge feature baseline, on simulated map pairs
 
 Errors in what the user gave (unknown scenario, unreadable map, bad values) print one line
 ``mrslam: error: ...`` and exit with status 2.
@@ -67,6 +69,25 @@ def _build_parser() -> argparse.ArgumentParser:
     slam.add_argument("--steps", type=int, default=3000, help="env steps per run (default 3000)")
     slam.add_argument("--seed", type=int, default=0)
     slam.add_argument("--json", action="store_true")
+    merge = kinds.add_parser(
+        "merge", help="map merging: success, wrong answers, refusals and time per method"
+    )
+    merge.add_argument("--pairs", type=int, default=40, help="map pairs (default 40)")
+    merge.add_argument("--seed", type=int, default=0)
+    merge.add_argument(
+        "--methods",
+        default="ours,random-walk,features",
+        help="comma-separated methods (default: ours,random-walk,features)",
+    )
+    merge.add_argument("--regenerate", action="store_true", help="rebuild the cached pairs")
+    merge.add_argument(
+        "--cache",
+        type=Path,
+        default=Path("runs") / "bench-merge-pairs",
+        help="folder of the cached pairs (default runs/bench-merge-pairs)",
+    )
+    merge.add_argument("--out", type=Path, help="per-pair results: .csv, else JSON")
+    merge.add_argument("--json", action="store_true", help="print the summary as JSON")
     return parser
 
 
@@ -127,6 +148,8 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
 def _cmd_bench(args: argparse.Namespace) -> int:
     if args.bench == "slam":
         return _cmd_bench_slam(args)
+    if args.bench == "merge":
+        return _cmd_bench_merge(args)
     from mrslam_env.worlds import available_scenarios, build_world
     from scenarios.bench import bench_sim
 
@@ -140,11 +163,14 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         print(json.dumps([row.as_dict() for row in rows], indent=2))
         return 0
     print(f"env steps/s, 2 robots x 360 beams, median of {args.repeats} x {args.steps} steps")
-    print(f"{'scenario':<14} {'mrslam':>10} {'IR-SIM':>10} {'ratio':>7}")
+    print(f"{'scenario':<14} {'mrslam':>10} {'IR-SIM':>10} {'ratio':>7} {'with SLAM':>10}")
     for row in rows:
         theirs = "-" if row.irsim_steps_per_s is None else f"{row.irsim_steps_per_s:10.0f}"
         ratio = "-" if row.ratio is None else f"{row.ratio:6.1f}x"
-        print(f"{row.scenario:<14} {row.mrslam_steps_per_s:>10.0f} {theirs:>10} {ratio:>7}")
+        slam = "-" if row.with_slam_steps_per_s is None else f"{row.with_slam_steps_per_s:10.0f}"
+        print(
+            f"{row.scenario:<14} {row.mrslam_steps_per_s:>10.0f} {theirs:>10} {ratio:>7} {slam:>10}"
+        )
     return 0
 
 
@@ -161,6 +187,51 @@ def _cmd_bench_slam(args: argparse.Namespace) -> int:
     warm_up()  # compile/load the numba kernels before anything is timed
     rows = run_slam_benchmark(args.scenarios or DEFAULT_SCENARIOS, args.steps, args.seed)
     print(json.dumps(rows, indent=2) if args.json else format_slam_table(rows))
+    return 0
+
+
+def _cmd_bench_merge(args: argparse.Namespace) -> int:
+    from scenarios.bench_merge import (
+        PairGenerationConfig,
+        format_merge_table,
+        load_or_generate_pairs,
+        resolve_methods,
+        run_merge_benchmark,
+        summarize,
+        write_rows,
+    )
+
+    names = [name.strip() for name in args.methods.split(",") if name.strip()]
+    if not names:
+        raise ValueError("--methods names no method")
+    if args.pairs < 1:
+        raise ValueError(f"--pairs must be >= 1, got {args.pairs}")
+    methods, skipped = resolve_methods(names)
+
+    def progress(message: str) -> None:
+        print(message, file=sys.stderr, flush=True)
+
+    config = PairGenerationConfig(n_pairs=args.pairs, seed=args.seed)
+    pairs, manifest = load_or_generate_pairs(
+        config, args.cache, regenerate=args.regenerate, progress=progress
+    )
+    rows = run_merge_benchmark(pairs, methods, seed=args.seed, progress=progress)
+    summary = summarize(rows, list(methods))
+    generation = {
+        "pairs": len(pairs),
+        "generation_seconds": manifest["generation_seconds"],
+        "shortfall": manifest["shortfall"],
+    }
+    if args.out is not None:
+        write_rows(args.out, rows, {"summary": summary, "skipped": skipped, **generation})
+    if args.json:
+        print(json.dumps({"summary": summary, "skipped": skipped, **generation}, indent=2))
+    else:
+        print(
+            f"{len(pairs)} pairs ({sum(p.overlapping() for p in pairs)} overlapping), "
+            f"generated in {manifest['generation_seconds']:.0f} s"
+        )
+        print(format_merge_table(summary, skipped))
     return 0
 
 

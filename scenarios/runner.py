@@ -1,8 +1,9 @@
 """The experiment runner behind ``mrslam run``.
 
-For now (foundation): robots wander with :class:`agents.wander.WanderPolicy` and the run is
-recorded; the full experiment (SLAM, map merging, rendezvous, coordinated exploration)
-replaces the policy in later issues.
+For now: robots wander with :class:`agents.wander.WanderPolicy`, each mapping with its
+onboard SLAM; the run is recorded and each robot's final map saved as a ROS map file. The
+full experiment (map merging, rendezvous, coordinated exploration) replaces the policy in
+later issues.
 """
 
 from __future__ import annotations
@@ -20,10 +21,12 @@ import numpy as np
 from agents.wander import WanderPolicy
 from mrslam_env.config import EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
-from mrslam_env.mapio import load_map
+from mrslam_env.geometry import transform_points
+from mrslam_env.mapio import load_map, save_map
 from mrslam_env.recording import Recorder
 from mrslam_env.sim.mapworld import world_from_map
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
+from mrslam_env.slam.evaluation import map_agreement
 from mrslam_env.worlds import build_world
 
 __all__ = ["RunConfig", "resolve_world", "run_experiment"]
@@ -48,13 +51,16 @@ class RunConfig:
     """Write ``recording.rrd``."""
     scan_every: int = 5
     """Log lidar scans every this many steps (poses are logged every step)."""
+    map_every: int = 10
+    """Log a robot's map (when it changed), path and ATE every this many steps."""
     progress: bool = True
 
     def __post_init__(self) -> None:
         if self.max_steps < 1:
             raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
-        if self.scan_every < 1:
-            raise ValueError(f"scan_every must be >= 1, got {self.scan_every}")
+        for name in ("scan_every", "map_every"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
 
 
 def resolve_world(scenario: str, map_path: Path | None, seed: int = 0) -> WorldSpec:
@@ -76,6 +82,12 @@ def _progress(total: int, enabled: bool) -> Iterator[Any]:
         bar.close()
 
 
+def _squared_error(world_from_map: np.ndarray, pose_in_map: np.ndarray, true_pose) -> float:
+    """Squared position error (m²) of a SLAM pose against the truth."""
+    estimate = transform_points(world_from_map, pose_in_map[None, :2])[0]
+    return float(np.sum((estimate - np.asarray(true_pose)[:2]) ** 2))
+
+
 def run_experiment(config: RunConfig) -> dict[str, Any]:
     """Run one experiment, write its outputs, return the report (also ``report.json``)."""
     world = resolve_world(config.scenario, config.map_path, config.seed)
@@ -90,7 +102,15 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
         agent: WanderPolicy(env_config.lidar.n_beams, np.random.default_rng([config.seed, i]))
         for i, agent in enumerate(agents)
     }
-    recorder = Recorder(run_dir / "recording.rrd", n_robots=len(agents)) if config.record else None
+    recorder = (
+        Recorder(run_dir / "recording.rrd", n_robots=len(agents), map_every=config.map_every)
+        if config.record
+        else None
+    )
+    # The map frame of robot i is its start pose: that is how its SLAM is judged.
+    world_from_maps = env.simulator.starts.copy()
+    squared_errors = np.zeros(len(agents))
+    logged_scans = [-1] * len(agents)
     started = time.perf_counter()
     collisions = dict.fromkeys(agents, 0)
     distance = dict.fromkeys(agents, 0.0)
@@ -104,6 +124,10 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
             f"run {name}: world {world.name}, {len(agents)} robots, seed {config.seed}"
         )
     previous = {agent: infos[agent]["true_pose"] for agent in agents}
+    for i, agent in enumerate(agents):
+        squared_errors[i] += _squared_error(
+            world_from_maps[i], observations[agent]["pose"], infos[agent]["true_pose"]
+        )
     with _progress(config.max_steps, config.progress) as bar:
         while env.agents:
             actions = {
@@ -114,11 +138,14 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
             bar.update(1)
             link = bool(observations[agents[0]]["comm"].any()) if len(agents) > 1 else False
             comm_steps += link
-            for agent in agents:
+            for i, agent in enumerate(agents):
                 pose = infos[agent]["true_pose"]
                 distance[agent] += float(np.hypot(*(pose[:2] - previous[agent][:2])))
                 previous[agent] = pose
                 collisions[agent] += infos[agent]["collision"]
+                squared_errors[i] += _squared_error(
+                    world_from_maps[i], observations[agent]["pose"], pose
+                )
             if recorder is None:
                 continue
             recorder.set_time(steps, steps * env_config.dt)
@@ -142,7 +169,19 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                 recorder.log_scalar(
                     f"coverage/{agent}", infos[agent]["observed_area"] / env.observable_area
                 )
+                recorder.log_robot_pose(i, observations[agent]["pose"])
+                if recorder.map_due or not env.agents:
+                    slam = env.robot_slam(agent)
+                    recorder.log_robot_path(i, slam.trajectory)
+                    recorder.log_scalar(f"ate/{agent}", np.sqrt(squared_errors[i] / (steps + 1)))
+                    if slam.n_integrated != logged_scans[i]:
+                        recorder.log_grid(f"{agent}/map", env.robot_map(agent))
+                        logged_scans[i] = slam.n_integrated
     wall_time = time.perf_counter() - started
+    maps = {agent: run_dir / f"{agent}.yaml" for agent in agents}
+    for agent, path in maps.items():
+        save_map(path, env.robot_map(agent))
+    truth = ground_truth_map(world, env.robot_map(agents[0]).resolution)
     report: dict[str, Any] = {
         "scenario": world.name,
         "seed": config.seed,
@@ -160,7 +199,16 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
             }
             for agent in agents
         },
-        "outputs": {"run_dir": str(run_dir)},
+        "slam": {
+            agent: {
+                "ate": round(float(np.sqrt(squared_errors[i] / (steps + 1))), 4),
+                "map_agreement": round(
+                    map_agreement(env.robot_map(agent), world_from_maps[i], truth), 4
+                ),
+            }
+            for i, agent in enumerate(agents)
+        },
+        "outputs": {"run_dir": str(run_dir), "maps": {a: str(p) for a, p in maps.items()}},
     }
     if recorder is not None:
         recorder.log_event(f"run finished after {steps} steps")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rerun.chunk import RrdReader
+from test_recording import Recording
 
 from mrslam_env.gridmap import FREE, OCCUPIED
 from mrslam_env.mapio import load_map
@@ -72,9 +72,23 @@ def test_run_writes_report_and_recording(capsys, tmp_path) -> None:
     for robot in ("robot_0", "robot_1"):
         assert 0.0 < report["robots"][robot]["coverage"] <= 1.0
         assert report["robots"][robot]["distance"] > 1.0  # the wanderer moves
-    entities = {chunk.entity_path for chunk in RrdReader(tmp_path / "t" / "recording.rrd").stream()}
+    recording = Recording(tmp_path / "t" / "recording.rrd")
     expected = ("/world/ground_truth", "/world/robot_0/true_pose", "/world/robot_1/scan", "/events")
-    assert set(expected) <= entities
+    assert set(expected) <= set(recording.chunks)
+    for robot in ("robot_0", "robot_1"):
+        slam = report["slam"][robot]
+        assert slam["ate"] < 0.1 and slam["map_agreement"] >= 0.97
+        # Each robot's map is saved, and recorded with its pose and path in its own frame.
+        saved = load_map(tmp_path / "t" / f"{robot}.yaml")
+        assert report["outputs"]["maps"][robot] == str(tmp_path / "t" / f"{robot}.yaml")
+        for entity in ("map", "pose", "path"):
+            assert f"/{robot}/{entity}" in recording.chunks
+        assert f"/metrics/ate/{robot}" in recording.chunks
+        (origin,) = recording.at_step(f"/{robot}/pose", "Arrows2D:origins", 60)
+        cell = saved.world_to_cell(np.asarray(origin))[0]
+        assert saved.free[cell[0], cell[1]], "the final pose stands on free space of the map"
+        (translation,) = recording.at_step(f"/{robot}/map", "GridMap:translation", 60)
+        np.testing.assert_allclose(np.ravel(translation)[:2], saved.origin, atol=1e-6)
 
 
 def test_run_from_a_map_file(capsys, tmp_path) -> None:
@@ -125,9 +139,15 @@ def test_bench_sim_json_rows(capsys) -> None:
     )
     assert status == 0
     (row,) = json.loads(out)
-    assert set(row) == {"scenario", "slam", "mrslam_steps_per_s", "irsim_steps_per_s"}
-    assert row["scenario"] == "maze" and row["slam"] is False
+    assert set(row) == {
+        "scenario",
+        "mrslam_steps_per_s",
+        "with_slam_steps_per_s",
+        "irsim_steps_per_s",
+    }
+    assert row["scenario"] == "maze"
     assert np.isfinite(row["mrslam_steps_per_s"]) and row["mrslam_steps_per_s"] > 0
+    assert np.isfinite(row["with_slam_steps_per_s"]) and row["with_slam_steps_per_s"] > 0
     assert np.isfinite(row["irsim_steps_per_s"]) and row["irsim_steps_per_s"] > 0
 
 

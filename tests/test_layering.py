@@ -34,6 +34,13 @@ def test_light_imports(statement: str) -> None:
         assert heavy not in loaded, f"`{statement}` imports {heavy}"
 
 
+@pytest.mark.parametrize("name", ["parallel_env", "env", "MultiRobotSlamEnv"])
+def test_the_package_resolves_the_env_lazily(name: str) -> None:
+    # The README's first line of Python; it must work in a fresh interpreter.
+    loaded = modules_loaded_by(f"from mrslam_env import {name}")
+    assert "pettingzoo" in loaded and "pymunk" in loaded
+
+
 def imports_of(package: str) -> dict[str, set[str]]:
     """Top-level module names each file of a package imports (statically)."""
     found = {}

@@ -216,6 +216,8 @@ def test_integration_matches_the_slow_reference() -> None:
         np.testing.assert_allclose(grid._hit_mean, hit_mean, atol=1e-6)
         np.testing.assert_array_equal(grid._hit_count, hit_count)
         np.testing.assert_array_equal(grid.sector_mask, masks)
+        known = (log_odds < config.free_threshold) | (log_odds > config.occupied_threshold)
+        assert grid.known_cells == known.sum(), f"step {step}"
         expected_index = np.where(
             log_odds > config.occupied_threshold,
             np.minimum((hit_mean[..., 1] * SUBCELLS).astype(int), SUBCELLS - 1) * SUBCELLS
@@ -292,6 +294,7 @@ def test_the_grid_grows_without_moving_cells(direction: tuple[int, int]) -> None
     # Integration still works after growing.
     grid.integrate_scan(in_map, noisy_scan(world, pose, rng), 8.0)
     assert_fields_consistent(grid)
+    assert grid.known_cells == (grid.to_gridmap().cells != UNKNOWN).sum()
 
 
 def test_to_gridmap_is_the_trinary_view() -> None:

@@ -65,8 +65,9 @@ class GridConfig:
     occupied_threshold: float = 0.5
     """A cell is OCCUPIED when its log-odds exceed this (>= 0); such cells feed the
     likelihood fields."""
-    free_threshold: float = -0.5
-    """A cell is FREE when its log-odds are below this (<= 0); in between, UNKNOWN."""
+    free_threshold: float = -0.3
+    """A cell is FREE when its log-odds are below this (<= 0); in between, UNKNOWN. Above
+    ``log_odds_miss``, so that one beam through a cell shows it free, as in gmapping."""
     no_return_clear_distance: float = 3.0
     """How far a beam with no return (range == max range) clears free space, m; 0 turns
     it off. Clearing stops at the first cell already OCCUPIED (a dropout in front of a

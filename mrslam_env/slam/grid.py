@@ -196,6 +196,17 @@ def _restamp(
 
 
 @numba.njit(cache=True)
+def _is_known(
+    value: float | np.floating[Any], free_threshold: float, occupied_threshold: float
+) -> int:
+    # Compare in float32, as numpy does for the float32 grid against a Python float
+    # (to_gridmap): a threshold such as -0.3 is not exact in float32.
+    if value < np.float32(free_threshold) or value > np.float32(occupied_threshold):
+        return 1
+    return 0
+
+
+@numba.njit(cache=True)
 def scan_extent(
     x: float,
     y: float,
@@ -252,7 +263,8 @@ def integrate_scan(
     log_odds_min: float,
     log_odds_max: float,
     occupied_threshold: float,
-) -> int:
+    free_threshold: float,
+) -> tuple[int, int]:
     """Integrate one scan into a log-odds grid and its likelihood fields (in place).
 
     Parameters
@@ -293,18 +305,24 @@ def integrate_scan(
         missing normal).
     max_range, min_range, no_return_clear_distance : float
         m.
-    log_odds_hit, log_odds_miss, log_odds_min, log_odds_max, occupied_threshold : float
-        The update (see :class:`~mrslam_env.slam.config.GridConfig`).
+    log_odds_hit, log_odds_miss, log_odds_min, log_odds_max : float
+    occupied_threshold, free_threshold : float
+        The update and the trinary thresholds (see
+        :class:`~mrslam_env.slam.config.GridConfig`).
 
     Returns
     -------
-    int
+    flips : int
         How many cells turned OCCUPIED or stopped being OCCUPIED.
+    newly_known : int
+        The net change in the number of known cells (FREE or OCCUPIED in the trinary
+        view): cells that became known minus cells that went back to UNKNOWN.
     """
     rows, cols = log_odds.shape
     n = ranges.shape[0]
     dtheta = 2.0 * math.pi / n
     flips = 0
+    newly_known = 0
     # Pass 1: mark the end cell of every returning beam.
     for i in range(n):
         r = ranges[i]
@@ -352,6 +370,9 @@ def integrate_scan(
                 continue
             after = np.float32(max(before + log_odds_miss, log_odds_min))
             log_odds[iy, ix] = after
+            newly_known += _is_known(after, free_threshold, occupied_threshold) - _is_known(
+                before, free_threshold, occupied_threshold
+            )
             if before > occupied_threshold >= after:
                 _restamp(
                     fine_fields, coarse_field, fine_kernels, coarse_kernels, stamp_index,
@@ -378,8 +399,12 @@ def integrate_scan(
         hit_mean[iy, ix, 0] = mean_x
         hit_mean[iy, ix, 1] = mean_y
         # Round to float32 before comparing: the stored value decides the cell's state.
-        after = np.float32(min(max(log_odds[iy, ix] + log_odds_hit, log_odds_min), log_odds_max))
+        before = log_odds[iy, ix]
+        after = np.float32(min(max(before + log_odds_hit, log_odds_min), log_odds_max))
         log_odds[iy, ix] = after
+        newly_known += _is_known(after, free_threshold, occupied_threshold) - _is_known(
+            before, free_threshold, occupied_threshold
+        )
         if after > occupied_threshold:
             sub_x = min(int(mean_x * SUBCELLS), SUBCELLS - 1)
             sub_y = min(int(mean_y * SUBCELLS), SUBCELLS - 1)
@@ -399,7 +424,7 @@ def integrate_scan(
                     fine_fields, coarse_field, fine_kernels, coarse_kernels, stamp_index,
                     sector_mask, iy, ix, new_index, mask,
                 )  # fmt: skip
-    return flips
+    return flips, newly_known
 
 
 class OccupancyGrid:
@@ -429,6 +454,9 @@ class OccupancyGrid:
         radius = max(self.fine_kernels.shape[1], self.coarse_kernels.shape[1]) // 2
         self._margin = radius + 2
         self._scan_id = 0
+        self.known_cells = 0
+        """Cells FREE or OCCUPIED in the trinary view (:meth:`to_gridmap`), kept current
+        by :meth:`integrate_scan`; times ``resolution**2``, the mapped area."""
         chunk = self.config.growth_chunk
         # Cell index (iy, ix) of the origin on the lattice through the frame's (0, 0).
         self._origin_index = (-chunk // 2, -chunk // 2)
@@ -616,34 +644,35 @@ class OccupancyGrid:
         self.ensure_contains(*scan_extent(x, y, heading, scan, max_range, config.min_range, clear))
         self._scan_id += 1
         x0, y0 = self.origin
-        return int(
-            integrate_scan(
-                self._log_odds,
-                self._hit_marks,
-                self._hit_mean,
-                self._hit_count,
-                self._stamp_index,
-                self._sector_mask,
-                self._fine_fields,
-                self._coarse_field[0],
-                self.fine_kernels,
-                self.coarse_kernels,
-                self._scan_id,
-                x0,
-                y0,
-                self.resolution,
-                x,
-                y,
-                heading,
-                scan,
-                scan_normals(scan, max_range, config.min_range) if normals is None else normals,
-                float(max_range),
-                config.min_range,
-                clear,
-                config.log_odds_hit,
-                config.log_odds_miss,
-                config.log_odds_min,
-                config.log_odds_max,
-                config.occupied_threshold,
-            )
+        flips, newly_known = integrate_scan(
+            self._log_odds,
+            self._hit_marks,
+            self._hit_mean,
+            self._hit_count,
+            self._stamp_index,
+            self._sector_mask,
+            self._fine_fields,
+            self._coarse_field[0],
+            self.fine_kernels,
+            self.coarse_kernels,
+            self._scan_id,
+            x0,
+            y0,
+            self.resolution,
+            x,
+            y,
+            heading,
+            scan,
+            scan_normals(scan, max_range, config.min_range) if normals is None else normals,
+            float(max_range),
+            config.min_range,
+            clear,
+            config.log_odds_hit,
+            config.log_odds_miss,
+            config.log_odds_min,
+            config.log_odds_max,
+            config.occupied_threshold,
+            config.free_threshold,
         )
+        self.known_cells += int(newly_known)
+        return flips
