@@ -16,7 +16,8 @@ All spatial data is in metres. Robots are numbered from 0 (``robot_0``, ``robot_
 ``robot_i/map``                robot i's own map (``rr.GridMap``) in its map frame
 ``robot_i/pose``               its SLAM pose there: heading arrow + footprint circle
 ``robot_i/path``               its SLAM trajectory there (``LineStrips2D``)
-``merge/...``                  merge stages; ``rendezvous/...``; ``team/...``
+``merge/...``                  merge stages, in map 1's frame (:meth:`Recorder.log_merge`)
+``rendezvous/...``, ``team/...``  the team's decisions
 ``metrics/<name>``             ``Scalars``
 ``events``                     ``TextLog`` of everything the team decides
 =============================  ==========================================================
@@ -60,6 +61,7 @@ from mrslam_env.geometry import transform_points, wrap_angle
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 
 if TYPE_CHECKING:
+    from mrslam_env.merge.pipeline import MergeResult
     from mrslam_env.sim.world import WorldSpec
 
 __all__ = [
@@ -287,6 +289,7 @@ class Recorder:
         if not math.isfinite(sim_time):
             raise ValueError(f"sim_time must be finite, got {sim_time}")
         self._step = int(step)
+        self._sim_time = float(sim_time)
         self._stream.set_time("step", sequence=self._step)
         self._stream.set_time("sim_time", duration=float(sim_time))
 
@@ -435,6 +438,143 @@ class Recorder:
         """
         self._check_open()
         self._log_grid(entity, grid, parent_from_grid, draw_order, static=static, opacity=opacity)
+
+    # -- map merging ---------------------------------------------------------------------
+
+    def log_merge(self, result: MergeResult, m1: GridMap, m2: GridMap) -> None:
+        """Log one :func:`~mrslam_env.merge.pipeline.merge_maps` outcome under ``merge/``.
+
+        The ``merge`` view is map 1's frame. Entities, all at the current ``step``; the
+        stages that iterate are also on a ``merge_iteration`` timeline:
+
+        ==============================  ============================================
+        ``merge/map1``, ``merge/map2``  the inputs; map 2 placed by the result's
+                                        transform, or beside map 1 when not merged
+        ``merge/skeleton/map1|map2``    skeleton cells (Points2D), same placement
+        ``merge/virtual_robot/path``    the virtual runs along map 1's skeleton
+        ``merge/virtual_robot/scan``    the virtual scans' returns (map 1 frame)
+        ``merge/mcl/particles``         MCL particles in map 2 per iteration
+        ``merge/hypotheses``            judged hypotheses: where each puts map 2's
+                                        origin (arrows), labelled by rank
+        ``merge/refine/candidate``      random-walk proposals of the best candidate
+        ``merge/refine/best``           its best transform so far
+        ``merge/result``                the fused map (when merged)
+        ``metrics/merge/*``             psi, acceptance index, seconds
+        ==============================  ============================================
+
+        Needs a result made with ``trace=True`` for the skeleton, virtual robot, MCL and
+        random-walk entities; without it only maps, hypotheses and the result are logged.
+        """
+        self._check_open()
+        step = self._step
+        transform = result.transform
+        if transform is not None:
+            placement = np.asarray(transform, dtype=np.float64)
+        else:
+            # Side by side: map 2's frame shifted right of map 1's extent.
+            x1 = m1.origin[0] + m1.cells.shape[1] * m1.resolution
+            placement = np.array([x1 + 2.0 - m2.origin[0], m1.origin[1] - m2.origin[1], 0.0])
+        self._log_grid("merge/map1", m1, None, _DRAW_ORDER_GRID, static=False)
+        self._log_grid("merge/map2", m2, placement, _DRAW_ORDER_GRID + 1, static=False, opacity=0.6)
+        trace = result.trace
+        if trace is not None:
+            hypotheses = trace.hypotheses
+            w1, w2 = trace.working1, trace.working2
+            for name, graph, grid, where in (
+                ("map1", hypotheses.skeleton1, w1, None),
+                ("map2", hypotheses.skeleton2, w2, placement),
+            ):
+                points = grid.cell_to_world(np.argwhere(graph.skeleton))
+                if where is not None:
+                    points = transform_points(where, points)
+                self._stream.log(
+                    f"merge/skeleton/{name}",
+                    rr.Points2D(points, radii=0.03, colors=(230, 120, 0), draw_order=15.0),
+                )
+            paths = [run.poses_in_map1[:, :2] for run in hypotheses.runs]
+            if paths:
+                self._stream.log(
+                    "merge/virtual_robot/path",
+                    rr.LineStrips2D(paths, radii=0.03, colors=(200, 0, 200), draw_order=16.0),
+                )
+            iteration = 0
+            for k, run in enumerate(hypotheses.runs):
+                history = (
+                    hypotheses.mcl_results[k].history if k < len(hypotheses.mcl_results) else []
+                )
+                for t, pose in enumerate(run.poses_in_map1):
+                    self._stream.set_time("merge_iteration", sequence=iteration)
+                    iteration += 1
+                    ranges = np.nan_to_num(run.ranges[t], nan=run.max_range)
+                    hits = scan_hits_world(pose, ranges, run.beam_angles, run.max_range)
+                    self._stream.log(
+                        "merge/virtual_robot/scan",
+                        rr.Points2D(hits, radii=0.03, colors=(200, 0, 200), draw_order=17.0),
+                    )
+                    if t < len(history):
+                        particles = transform_points(placement, history[t][:, :2])
+                        self._stream.log(
+                            "merge/mcl/particles",
+                            rr.Points2D(
+                                particles, radii=0.02, colors=(0, 150, 255), draw_order=18.0
+                            ),
+                        )
+            if trace.refinements and trace.refinements[0].trace is not None:
+                walk = trace.refinements[0].trace
+                origin = np.zeros((1, 2))
+                for j, candidate in enumerate(walk.candidates):
+                    self._stream.set_time("merge_iteration", sequence=iteration + j)
+                    self._stream.log(
+                        "merge/refine/candidate",
+                        rr.Points2D(
+                            transform_points(candidate, origin),
+                            radii=0.05,
+                            colors=(120, 120, 120),
+                        ),
+                    )
+                    self._stream.log("metrics/merge/refine_psi", rr.Scalars(walk.best_psi[j]))
+            self._stream.reset_time()
+            self.set_time(step, self._sim_time)
+        if result.hypotheses:
+            origins = np.array([h.map1_from_map2[:2] for h in result.hypotheses])
+            headings = np.array(
+                [
+                    [math.cos(h.map1_from_map2[2]), math.sin(h.map1_from_map2[2])]
+                    for h in result.hypotheses
+                ]
+            )
+            self._stream.log(
+                "merge/hypotheses",
+                rr.Arrows2D(
+                    origins=origins,
+                    vectors=0.5 * headings,
+                    labels=[
+                        f"#{i} ai {h.acceptance_index:.2f}" for i, h in enumerate(result.hypotheses)
+                    ],
+                    colors=[(0, 170, 0) if h.confident else (200, 0, 0) for h in result.hypotheses],
+                    radii=0.04,
+                    draw_order=_DRAW_ORDER_POSE,
+                ),
+            )
+        if result.chosen is not None and transform is not None:
+            best = np.asarray(transform, dtype=np.float64)
+            self._stream.log(
+                "merge/refine/best",
+                rr.Arrows2D(
+                    origins=best[None, :2],
+                    vectors=[[0.5 * math.cos(best[2]), 0.5 * math.sin(best[2])]],
+                    colors=(0, 170, 0),
+                    radii=0.06,
+                    draw_order=_DRAW_ORDER_POSE,
+                ),
+            )
+            self.log_scalar("merge/psi", result.psi)
+            if result.agreement is not None:
+                self.log_scalar("merge/acceptance_index", result.agreement.index)
+        if result.fused is not None:
+            self._log_grid("merge/result", result.fused, None, _DRAW_ORDER_GRID + 2, static=False)
+        self.log_scalar("merge/seconds", result.seconds.get("total", math.nan))
+        self.log_event(result.reason)
 
     # -- lifetime ------------------------------------------------------------------------
 

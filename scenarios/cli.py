@@ -1,6 +1,7 @@
 """The ``mrslam`` command line.
 
 ``mrslam run``                 the end-to-end experiment on the default scenario
+``mrslam merge M1.yaml M2.yaml`` merge two ROS map files (``-o``, ``--json``, ``--rrd``)
 ``mrslam scenarios``           list worlds; ``--export NAME OUT.yaml`` writes a floor plan
 ``mrslam bench sim``           simulator speed, side by side with IR-SIM
 ``mrslam bench slam``          onboard SLAM accuracy (ATE, map agreement) and speed
@@ -8,7 +9,8 @@
                                the ROS map_merge feature baseline, on simulated map pairs
 
 Errors in what the user gave (unknown scenario, unreadable map, bad values) print one line
-``mrslam: error: ...`` and exit with status 2.
+``mrslam: error: ...`` and exit with status 2. ``mrslam merge`` exits with 3 when there is
+no confident merge (the transform is null and the reason is printed).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from pathlib import Path
 __all__ = ["main"]
 
 EXIT_BAD_INPUT = 2
+EXIT_NO_MERGE = 3
 
 
 def _build_parser() -> argparse.ArgumentParser:
@@ -43,6 +46,17 @@ def _build_parser() -> argparse.ArgumentParser:
     run.add_argument("--name", help="run folder name (default <scenario>-seed<seed>)")
     run.add_argument("--no-record", action="store_true", help="do not write recording.rrd")
     run.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
+
+    merge = commands.add_parser(
+        "merge",
+        help="merge two ROS map files (exit 0 merged, 3 no confident merge, 2 bad input)",
+    )
+    merge.add_argument("map1", type=Path, metavar="MAP1.yaml")
+    merge.add_argument("map2", type=Path, metavar="MAP2.yaml")
+    merge.add_argument("-o", "--output", type=Path, help="write the merged map (ROS YAML + PGM)")
+    merge.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
+    merge.add_argument("--rrd", type=Path, help="record the merge stages to this .rrd file")
+    merge.add_argument("--seed", type=int, default=0, help="seed of the randomised stages")
 
     scen = commands.add_parser("scenarios", help="list the worlds, or export one as a ROS map")
     scen.add_argument(
@@ -115,6 +129,36 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(f"{report['scenario']}: {summary}; {robots}")
         print(f"outputs in {report['outputs']['run_dir']}")
     return 0
+
+
+def _cmd_merge(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from mrslam_env.mapio import load_map, save_map
+    from mrslam_env.merge.pipeline import merge_maps
+
+    m1, m2 = load_map(args.map1), load_map(args.map2)
+    if args.output is not None and not args.output.parent.is_dir():
+        raise ValueError(f"output folder {args.output.parent} does not exist")
+    result = merge_maps(m1, m2, rng=np.random.default_rng(args.seed), trace=args.rrd is not None)
+    if args.rrd is not None:
+        from mrslam_env.recording import Recorder
+
+        with Recorder(args.rrd, n_robots=2) as recorder:
+            recorder.log_merge(result, m1, m2)
+    if result.fused is not None and args.output is not None:
+        save_map(args.output, result.fused)
+    if args.json:
+        print(json.dumps(result.as_dict(), indent=2))
+    elif result.transform is not None:
+        x, y, theta = result.transform
+        print(f"map1_from_map2: x {x:.4f} m, y {y:.4f} m, theta {theta:.5f} rad")
+        print(result.reason)
+        if args.output is not None:
+            print(f"merged map written to {args.output}")
+    else:
+        print(result.reason)
+    return 0 if result.transform is not None else EXIT_NO_MERGE
 
 
 def _cmd_scenarios(args: argparse.Namespace) -> int:
@@ -239,7 +283,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``mrslam`` console script; returns the exit status."""
     parser = _build_parser()
     args = parser.parse_args(argv)
-    handlers = {"run": _cmd_run, "scenarios": _cmd_scenarios, "bench": _cmd_bench}
+    handlers = {
+        "run": _cmd_run,
+        "merge": _cmd_merge,
+        "scenarios": _cmd_scenarios,
+        "bench": _cmd_bench,
+    }
     try:
         return handlers[args.command](args)
     except (ValueError, OSError) as error:

@@ -1,0 +1,147 @@
+"""Rendezvous verification of a merge hypothesis (DESIGN §5 step 5, §6).
+
+For a hypothesis ``T = map0_from_map1`` and the robots' current SLAM poses ``p0`` (in map
+0) and ``p1`` (in map 1), robot 1 should stand at ``T3 = p0⁻¹ · T · p1`` in robot 0's body
+frame (the paper's ``T3 = T1⁻¹ · T · T2``). The robots drive to a meeting point chosen
+free and reachable in both maps so that the later of the two arrives as early as
+possible; the peer sensor then settles it: the other robot seen where predicted (within
+the tolerances) accepts ``T``; a sighting elsewhere, or arriving and waiting without any
+sighting, rejects it.
+
+Pure functions on arrays and poses; the team coordinator (:mod:`agents.team`) drives them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mrslam_env.geometry import compose, inverse, transform_points, wrap_scalar
+from mrslam_env.gridmap import GridMap
+
+__all__ = [
+    "RendezvousConfig",
+    "Sighting",
+    "choose_meeting_point",
+    "field_on_lattice",
+    "judge_sighting",
+    "predicted_relative_pose",
+    "sighting_pose",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RendezvousConfig:
+    """How a rendezvous is judged."""
+
+    position_tolerance: float = 0.6
+    """A sighting matches the prediction when the other robot is within this distance (m)
+    of where the hypothesis puts it: SLAM drift of both robots since their maps were
+    merged, the hypothesis' own error and the peer sensor's noise all fit inside."""
+    heading_tolerance: float = math.radians(20.0)
+    """... and its heading within this (rad)."""
+    wait_steps: int = 60
+    """After both robots arrived, wait this many steps for a sighting before rejecting."""
+    timeout_steps: int = 900
+    """Give up on a rendezvous (reject) after this many steps in all."""
+    standoff: float = 0.9
+    """Robot 1 aims this far (m) from the meeting point, so the two do not drive into
+    each other; the sensor sees up to 5 m, so they sight each other on the way."""
+
+    def __post_init__(self) -> None:
+        for name in ("position_tolerance", "heading_tolerance", "standoff"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"RendezvousConfig.{name} must be > 0, got {value!r}")
+        for name in ("wait_steps", "timeout_steps"):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and value >= 1):
+                raise ValueError(f"RendezvousConfig.{name} must be an int >= 1, got {value!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class Sighting:
+    """A peer-sensor sighting judged against a prediction."""
+
+    matches: bool
+    position_error: float
+    """m."""
+    heading_error: float
+    """rad, absolute."""
+
+
+def predicted_relative_pose(
+    pose0_in_map0: ArrayLike, pose1_in_map1: ArrayLike, map0_from_map1: ArrayLike
+) -> FloatArray:
+    """Where robot 1 should be in robot 0's body frame if ``map0_from_map1`` is right:
+    ``T3 = p0⁻¹ · T · p1``, shape (3,)."""
+    return compose(inverse(pose0_in_map0), compose(map0_from_map1, pose1_in_map1))
+
+
+def sighting_pose(range_m: float, bearing: float, relative_heading: float) -> FloatArray:
+    """The pose (3,) of a sighted robot in the observer's body frame, from the peer
+    sensor's ``(range, bearing, relative heading)``."""
+    return np.array(
+        [range_m * math.cos(bearing), range_m * math.sin(bearing), wrap_scalar(relative_heading)]
+    )
+
+
+def judge_sighting(measured: ArrayLike, predicted: ArrayLike, config: RendezvousConfig) -> Sighting:
+    """Compare a sighting (``sighting_pose``) with the predicted relative pose."""
+    m = np.asarray(measured, dtype=np.float64)
+    p = np.asarray(predicted, dtype=np.float64)
+    position_error = float(np.hypot(*(m[:2] - p[:2])))
+    heading_error = abs(wrap_scalar(float(m[2] - p[2])))
+    matches = (
+        position_error <= config.position_tolerance and heading_error <= config.heading_tolerance
+    )
+    return Sighting(matches, position_error, heading_error)
+
+
+def field_on_lattice(
+    field1: NDArray[np.floating], grid1: GridMap, grid0: GridMap, map0_from_map1: ArrayLike
+) -> FloatArray:
+    """Resample a per-cell field of map 1 (e.g. robot 1's travel cost) onto map 0's
+    lattice through ``map0_from_map1`` (nearest cell); ``inf`` where map 1 has no cell."""
+    rows, cols = grid0.cells.shape
+    cells0 = np.indices((rows, cols)).reshape(2, -1).T
+    points_in_1 = transform_points(inverse(map0_from_map1), grid0.cell_to_world(cells0))
+    cells1 = grid1.world_to_cell(points_in_1)
+    inside = grid1.contains(cells1)
+    out = np.full(rows * cols, np.inf)
+    out[inside] = np.asarray(field1, dtype=np.float64)[cells1[inside, 0], cells1[inside, 1]]
+    return out.reshape(rows, cols)
+
+
+def choose_meeting_point(
+    cost0: NDArray[np.floating], cost1: NDArray[np.floating], grid0: GridMap
+) -> tuple[FloatArray, float] | None:
+    """The meeting point minimising the later arrival.
+
+    Parameters
+    ----------
+    cost0, cost1 : ndarray, shape of ``grid0.cells``
+        Travel cost (m, ``inf`` where unreachable or not free) of robot 0 and robot 1 to
+        every cell of map 0's lattice (robot 1's through :func:`field_on_lattice`).
+    grid0 : GridMap
+        Map 0 (the lattice).
+
+    Returns
+    -------
+    (point, cost) or None
+        The point (2,) in map 0's frame and ``max(cost0, cost1)`` there (m); None when no
+        cell is reachable by both.
+    """
+    later = np.maximum(np.asarray(cost0, dtype=np.float64), np.asarray(cost1, dtype=np.float64))
+    if not np.isfinite(later).any():
+        return None
+    # Ties (a plateau of equal later arrivals) go to the smaller total travel.
+    total = np.where(np.isfinite(later), later + 1e-3 * (cost0 + cost1), np.inf)
+    flat = int(np.argmin(total))
+    cell = np.array(np.unravel_index(flat, later.shape))
+    return grid0.cell_to_world(cell[None, :])[0], float(later.flat[flat])

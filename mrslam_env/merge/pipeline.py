@@ -1,0 +1,588 @@
+"""``merge_maps``: the whole virtual-robot-motion merge, from two grids to a verdict.
+
+DESIGN §5, offline (no rendezvous): the maps are brought to one working resolution; the
+hypothesis side (:func:`~mrslam_env.merge.hypotheses.generate_hypotheses`: skeletons,
+virtual runs along m1's skeleton, partial-map MCL in m2, clusters pooled and voted across
+runs) proposes ranked ``map1_from_map2`` hypotheses; the best few are refined by the Birk &
+Carpin random walk (:func:`~mrslam_env.merge.refine.refine_random_walk`) and judged
+cell by cell (:func:`~mrslam_env.merge.dissimilarity.acceptance_index`). A hypothesis is
+*confident* when the maps agree where they overlap (acceptance index), no wall of one map
+crosses open floor of the other (conflicts), they overlap enough to say so, and no
+*different* transform explains the maps about as well (ambiguity: symmetric buildings,
+repeated rooms). Otherwise the answer is "no confident merge" with the reason, never a
+guess. The winner is refined again at the finer input resolution and the maps are fused.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mrslam_env.geometry import inverse, wrap_scalar
+from mrslam_env.gridmap import GridMap
+from mrslam_env.merge.dissimilarity import (
+    Agreement,
+    DistanceMaps,
+    acceptance_index,
+    dissimilarity,
+    distance_maps,
+)
+from mrslam_env.merge.fuse import fuse_maps, resample_map
+from mrslam_env.merge.hypotheses import (
+    HypothesisConfig,
+    HypothesisSet,
+    generate_hypotheses,
+)
+from mrslam_env.merge.mcl import MclConfig
+from mrslam_env.merge.refine import RandomWalkConfig, RandomWalkResult, refine_random_walk
+from mrslam_env.merge.virtual import VirtualRobotConfig
+
+__all__ = [
+    "MergeConfig",
+    "MergeInputError",
+    "MergeResult",
+    "MergeTrace",
+    "ScoredHypothesis",
+    "merge_maps",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+class MergeInputError(ValueError):
+    """The maps cannot be merged as given (empty, no free space, resolutions too far
+    apart); the message is one line naming the problem."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MergeConfig:
+    """Everything :func:`merge_maps` decides with."""
+
+    working_resolution: float = 0.1
+    """Resolution (m) at which hypotheses are generated, refined and judged; maps finer
+    than this are coarsened (never refined). The winner is refined again at the finer
+    input resolution."""
+    max_working_cells: int = 160_000
+    """Coarse-to-fine for large maps: the working resolution is coarsened further (by
+    whole factors) until each map has at most this many cells."""
+    max_resolution_ratio: float = 4.0
+    """Refuse (bad input) two maps whose resolutions differ by more than this factor."""
+    min_known_area: float = 1.0
+    """Each map needs at least this much known area (m²) with some free space in it."""
+    virtual: VirtualRobotConfig = field(default_factory=VirtualRobotConfig)
+    mcl: MclConfig = field(default_factory=MclConfig)
+    pooling: HypothesisConfig = field(default_factory=HypothesisConfig)
+    random_walk: RandomWalkConfig = field(default_factory=RandomWalkConfig)
+    final_random_walk: RandomWalkConfig = field(
+        default_factory=lambda: RandomWalkConfig(
+            iterations=200, initial_std_xy=0.03, initial_std_theta=math.radians(0.5)
+        )
+    )
+    """The last refinement, at the input resolution."""
+    candidates: int = 6
+    """How many of the ranked hypotheses are refined and judged."""
+    min_acceptance_index: float = 0.9
+    """A confident merge agrees on at least this fraction of the cells known in both."""
+    max_conflict_fraction: float = 0.01
+    """... and has at most this fraction of conflicts (a wall of one map on open floor of
+    the other, beyond a two-cell tolerance)."""
+    min_overlap_area: float = 3.0
+    """... and overlaps on at least this many m²."""
+    conflict_weight: float = 10.0
+    """Score of a candidate: ``(agree - conflict_weight * conflicts) * cell area`` (m²)."""
+    ambiguity_ratio: float = 0.8
+    """Refuse when a confident candidate that is a *different* transform scores at least
+    this fraction of the best one."""
+    distinct_translation: float = 0.5
+    """Two transforms are the same answer when they move m2's known centre less than this
+    (m) apart ..."""
+    distinct_rotation: float = math.radians(8.0)
+    """... and differ in rotation by less than this (rad)."""
+
+    def __post_init__(self) -> None:
+        name = type(self).__name__
+        for attr in (
+            "working_resolution",
+            "max_resolution_ratio",
+            "min_known_area",
+            "min_overlap_area",
+            "distinct_translation",
+            "distinct_rotation",
+        ):
+            value = getattr(self, attr)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name}.{attr} must be a finite number > 0, got {value!r}")
+        for attr in ("max_working_cells", "candidates"):
+            value = getattr(self, attr)
+            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+                raise ValueError(f"{name}.{attr} must be an int >= 1, got {value!r}")
+        for attr in ("min_acceptance_index", "max_conflict_fraction", "ambiguity_ratio"):
+            value = getattr(self, attr)
+            if not (isinstance(value, int | float) and 0.0 <= value <= 1.0):
+                raise ValueError(f"{name}.{attr} must be in [0, 1], got {value!r}")
+        if not (math.isfinite(self.conflict_weight) and self.conflict_weight >= 0):
+            raise ValueError(f"{name}.conflict_weight must be >= 0, got {self.conflict_weight!r}")
+        if self.max_resolution_ratio < 1.0:
+            raise ValueError(
+                f"{name}.max_resolution_ratio must be >= 1, got {self.max_resolution_ratio!r}"
+            )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ScoredHypothesis:
+    """One hypothesis after refinement and judgement.
+
+    Attributes
+    ----------
+    map1_from_map2 : ndarray, shape (3,)
+        The refined transform (m, m, rad).
+    initial : ndarray, shape (3,)
+        The transform as proposed by the virtual robot (before refinement).
+    support : float
+        The proposal's scan support (fraction of virtual beams landing on m2's walls).
+    votes : int
+        Virtual runs that voted for it.
+    psi : float
+        Dissimilarity after refinement (cells; lower is better).
+    agreement : Agreement
+        Cell-by-cell agreement after refinement.
+    score : float
+        ``(agree - conflict_weight * conflicts) * cell area``, m².
+    confident : bool
+        Passes the acceptance index, conflict and overlap tests.
+    """
+
+    map1_from_map2: FloatArray
+    initial: FloatArray
+    support: float
+    votes: int
+    psi: float
+    agreement: Agreement
+    score: float
+    confident: bool
+
+    @property
+    def acceptance_index(self) -> float:
+        return self.agreement.index
+
+    @property
+    def overlap(self) -> float:
+        """Fraction of the smaller map's known cells that the other map also knows."""
+        return self.agreement.overlap_fraction
+
+    def as_dict(self) -> dict[str, object]:
+        x, y, theta = (float(v) for v in self.map1_from_map2)
+        return {
+            "transform": {"x": x, "y": y, "theta": theta},
+            "support": round(self.support, 4),
+            "votes": self.votes,
+            "psi": round(self.psi, 4) if math.isfinite(self.psi) else None,
+            "acceptance_index": round(self.agreement.index, 4),
+            "overlap": round(self.agreement.overlap_fraction, 4),
+            "conflicts": self.agreement.conflicts,
+            "score": round(self.score, 3),
+            "confident": self.confident,
+        }
+
+
+@dataclass(frozen=True, slots=True, kw_only=True, eq=False)
+class MergeTrace:
+    """What happened inside, for the recorder (all at the working resolution).
+
+    Attributes
+    ----------
+    working1, working2 : GridMap
+        The maps the hypotheses were made on.
+    hypotheses : HypothesisSet
+        Skeletons, virtual runs and MCL results (particle histories) of the hypothesis
+        side.
+    refinements : list of RandomWalkResult
+        One per judged candidate, in the order of :attr:`MergeResult.hypotheses`, with
+        their random-walk traces.
+    """
+
+    working1: GridMap
+    working2: GridMap
+    hypotheses: HypothesisSet
+    refinements: list[RandomWalkResult]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True, eq=False)
+class MergeResult:
+    """The outcome of :func:`merge_maps`.
+
+    Attributes
+    ----------
+    transform : ndarray, shape (3,), or None
+        ``map1_from_map2`` (m, m, rad, in the maps' own frames), or None when there is no
+        confident merge.
+    reason : str
+        One line: why the transform was accepted, or why there is none.
+    hypotheses : list of ScoredHypothesis
+        The judged candidates, best first.
+    chosen : ScoredHypothesis or None
+        The accepted candidate (its final refinement is :attr:`transform`).
+    fused : GridMap or None
+        m1 and m2 fused in m1's frame, at m1's resolution, when merged.
+    agreement : Agreement or None
+        The final agreement at the input resolution, when merged.
+    psi : float
+        The final dissimilarity (cells), NaN when not merged.
+    seconds : dict of str to float
+        Wall time per stage and ``"total"``.
+    trace : MergeTrace or None
+        With ``trace=True``.
+    """
+
+    transform: FloatArray | None
+    reason: str
+    hypotheses: list[ScoredHypothesis]
+    chosen: ScoredHypothesis | None
+    fused: GridMap | None
+    agreement: Agreement | None
+    psi: float
+    seconds: dict[str, float]
+    trace: MergeTrace | None = None
+
+    @property
+    def merged(self) -> bool:
+        return self.transform is not None
+
+    def as_dict(self) -> dict[str, object]:
+        """The ``mrslam merge --json`` report (DESIGN §8)."""
+        transform = None
+        if self.transform is not None:
+            x, y, theta = (float(v) for v in self.transform)
+            transform = {"x": x, "y": y, "theta": theta}
+        return {
+            "transform": transform,
+            "score": None if self.chosen is None else round(self.chosen.score, 3),
+            "acceptance_index": None if self.agreement is None else round(self.agreement.index, 4),
+            "psi": round(self.psi, 4) if math.isfinite(self.psi) else None,
+            "reason": self.reason,
+            "hypotheses": [h.as_dict() for h in self.hypotheses],
+            "seconds": round(self.seconds.get("total", math.nan), 4),
+            "stage_seconds": {k: round(v, 4) for k, v in self.seconds.items()},
+        }
+
+
+# --- input checks and resolutions -------------------------------------------------------------
+
+
+def _check_input(grid: GridMap, name: str, config: MergeConfig) -> None:
+    if not isinstance(grid, GridMap):
+        raise MergeInputError(f"{name} must be a GridMap, got {type(grid).__name__}")
+    if grid.cells.size == 0:
+        raise MergeInputError(f"{name} is empty (0 cells)")
+    known = np.count_nonzero(~grid.unknown)
+    if known == 0:
+        raise MergeInputError(f"{name} is all unknown: nothing to merge")
+    if not grid.free.any():
+        raise MergeInputError(f"{name} has no free space: nothing to localise in")
+    area = known * grid.resolution**2
+    if area < config.min_known_area:
+        raise MergeInputError(
+            f"{name} knows only {area:.2f} m² (need at least {config.min_known_area} m²)"
+        )
+
+
+def _working_resolution(m1: GridMap, m2: GridMap, config: MergeConfig) -> float:
+    """The coarsest of the inputs and ``working_resolution``, coarsened by whole factors
+    until both maps fit in ``max_working_cells``."""
+    base = max(m1.resolution, m2.resolution, config.working_resolution)
+    factor = 1
+    while True:
+        resolution = base * factor
+        cells = max(
+            (m.cells.shape[0] * m.resolution / resolution)
+            * (m.cells.shape[1] * m.resolution)
+            / resolution
+            for m in (m1, m2)
+        )
+        if cells <= config.max_working_cells:
+            return resolution
+        factor += 1
+
+
+def _at_resolution(grid: GridMap, resolution: float) -> GridMap:
+    if math.isclose(grid.resolution, resolution, rel_tol=1e-9):
+        return grid
+    return resample_map(grid, resolution)
+
+
+def same_answer(a: FloatArray, b: FloatArray, pivot: FloatArray, config: MergeConfig) -> bool:
+    """Whether two transforms are one answer: they put ``pivot`` (a point of m2, its
+    frame) within ``distinct_translation`` and turn within ``distinct_rotation``."""
+    ca, sa = math.cos(a[2]), math.sin(a[2])
+    cb, sb = math.cos(b[2]), math.sin(b[2])
+    pa = (a[0] + ca * pivot[0] - sa * pivot[1], a[1] + sa * pivot[0] + ca * pivot[1])
+    pb = (b[0] + cb * pivot[0] - sb * pivot[1], b[1] + sb * pivot[0] + cb * pivot[1])
+    moved = math.hypot(pa[0] - pb[0], pa[1] - pb[1])
+    turned = abs(wrap_scalar(float(a[2] - b[2])))
+    return moved < config.distinct_translation and turned < config.distinct_rotation
+
+
+# --- judging -------------------------------------------------------------------------------
+
+
+def judge(agreement: Agreement, resolution: float, config: MergeConfig) -> tuple[float, bool, str]:
+    """Score (m²), whether it is confident, and if not, why (one phrase)."""
+    cell_area = resolution**2
+    score = (agreement.agree - config.conflict_weight * agreement.conflicts) * cell_area
+    overlap_area = agreement.overlap * cell_area
+    if overlap_area < config.min_overlap_area:
+        return score, False, f"overlap {overlap_area:.1f} m² < {config.min_overlap_area} m²"
+    if agreement.index < config.min_acceptance_index:
+        return (
+            score,
+            False,
+            f"acceptance index {agreement.index:.3f} < {config.min_acceptance_index}",
+        )
+    if agreement.conflict_fraction > config.max_conflict_fraction:
+        return (
+            score,
+            False,
+            f"conflicts {agreement.conflict_fraction:.3f} > {config.max_conflict_fraction}",
+        )
+    return score, True, ""
+
+
+def _score_candidate(
+    w1: GridMap,
+    w2: GridMap,
+    d1: DistanceMaps,
+    d2: DistanceMaps,
+    hypothesis_transform: FloatArray,
+    support: float,
+    votes: int,
+    config: MergeConfig,
+    rng: np.random.Generator,
+    trace: bool,
+) -> tuple[ScoredHypothesis, RandomWalkResult, str]:
+    walk = refine_random_walk(
+        w1,
+        w2,
+        hypothesis_transform,
+        config=config.random_walk,
+        rng=rng,
+        distances1=d1,
+        distances2=d2,
+        trace=trace,
+    )
+    agreement = acceptance_index(w1, w2, walk.transform, distances1=d1, distances2=d2)
+    score, confident, why = judge(agreement, w1.resolution, config)
+    scored = ScoredHypothesis(
+        map1_from_map2=np.asarray(walk.transform, dtype=np.float64),
+        initial=np.asarray(hypothesis_transform, dtype=np.float64),
+        support=support,
+        votes=votes,
+        psi=float(walk.psi),
+        agreement=agreement,
+        score=score,
+        confident=confident,
+    )
+    return scored, walk, why
+
+
+# --- the pipeline ----------------------------------------------------------------------------
+
+
+def merge_maps(
+    m1: GridMap,
+    m2: GridMap,
+    config: MergeConfig | None = None,
+    *,
+    rng: np.random.Generator | int | None = None,
+    trace: bool = False,
+) -> MergeResult:
+    """Merge two partial occupancy maps by virtual robot motion (DESIGN §5).
+
+    Parameters
+    ----------
+    m1, m2 : GridMap
+        The maps, each in its own frame (resolutions may differ by up to
+        ``config.max_resolution_ratio``).
+    config : MergeConfig, optional
+    rng : numpy.random.Generator or int, optional
+        All randomness (an int seeds a new generator; None: seed 0, so that a merge is
+        reproducible by default).
+    trace : bool
+        Keep what the recorder draws (:class:`MergeTrace`).
+
+    Returns
+    -------
+    MergeResult
+        ``transform`` is ``map1_from_map2`` or None ("no confident merge", with
+        ``reason``).
+
+    Raises
+    ------
+    MergeInputError
+        Empty or all-unknown maps, maps without free space, resolutions too far apart.
+    """
+    config = config if config is not None else MergeConfig()
+    if not isinstance(rng, np.random.Generator):
+        rng = np.random.default_rng(0 if rng is None else rng)
+    started = time.perf_counter()
+    seconds: dict[str, float] = {}
+    _check_input(m1, "map 1", config)
+    _check_input(m2, "map 2", config)
+    ratio = max(m1.resolution, m2.resolution) / min(m1.resolution, m2.resolution)
+    if ratio > config.max_resolution_ratio:
+        raise MergeInputError(
+            f"resolutions {m1.resolution} m and {m2.resolution} m differ by {ratio:.1f}x "
+            f"(at most {config.max_resolution_ratio}x)"
+        )
+
+    tick = time.perf_counter()
+    resolution = _working_resolution(m1, m2, config)
+    w1, w2 = _at_resolution(m1, resolution), _at_resolution(m2, resolution)
+    d1, d2 = distance_maps(w1), distance_maps(w2)
+    seconds["prepare"] = time.perf_counter() - tick
+
+    tick = time.perf_counter()
+    proposals = generate_hypotheses(
+        w1,
+        w2,
+        virtual=config.virtual,
+        mcl=config.mcl,
+        pooling=config.pooling,
+        rng=rng,
+        trace=trace,
+    )
+    seconds["hypotheses"] = time.perf_counter() - tick
+    for stage, value in proposals.timings.items():
+        seconds[f"hypotheses.{stage}"] = value
+
+    tick = time.perf_counter()
+    pivot = w2.cell_to_world(np.argwhere(~w2.unknown).mean(axis=0)[None, :])[0]
+    scored: list[ScoredHypothesis] = []
+    walks: list[RandomWalkResult] = []
+    reasons: list[str] = []
+    for hypothesis in proposals.hypotheses[: config.candidates]:
+        candidate, walk, why = _score_candidate(
+            w1,
+            w2,
+            d1,
+            d2,
+            hypothesis.map1_from_map2,
+            hypothesis.support,
+            hypothesis.votes,
+            config,
+            rng,
+            trace,
+        )
+        scored.append(candidate)
+        walks.append(walk)
+        reasons.append(why)
+    order = sorted(range(len(scored)), key=lambda i: (not scored[i].confident, -scored[i].score))
+    scored = [scored[i] for i in order]
+    walks = [walks[i] for i in order]
+    reasons = [reasons[i] for i in order]
+    seconds["judge"] = time.perf_counter() - tick
+
+    merge_trace = (
+        MergeTrace(working1=w1, working2=w2, hypotheses=proposals, refinements=walks)
+        if trace
+        else None
+    )
+
+    def refuse(reason: str) -> MergeResult:
+        seconds["total"] = time.perf_counter() - started
+        return MergeResult(
+            transform=None,
+            reason=f"no confident merge: {reason}",
+            hypotheses=scored,
+            chosen=None,
+            fused=None,
+            agreement=None,
+            psi=math.nan,
+            seconds=seconds,
+            trace=merge_trace,
+        )
+
+    if not scored:
+        return refuse("the virtual robot found no hypothesis (too little structure)")
+    best = scored[0]
+    if not best.confident:
+        return refuse(f"best hypothesis fails: {reasons[0]}")
+    for other in scored[1:]:
+        if (
+            other.confident
+            and not same_answer(best.map1_from_map2, other.map1_from_map2, pivot, config)
+            and other.score >= config.ambiguity_ratio * best.score
+        ):
+            return refuse(
+                "ambiguous: two different transforms fit "
+                f"(scores {best.score:.1f} and {other.score:.1f} m²)"
+            )
+
+    tick = time.perf_counter()
+    fine = min(m1.resolution, m2.resolution)
+    f1, f2 = _at_resolution(m1, fine), _at_resolution(m2, fine)
+    transform = best.map1_from_map2
+    psi = float(best.psi)
+    agreement = best.agreement
+    if fine < resolution * (1.0 - 1e-9):
+        fd1, fd2 = distance_maps(f1), distance_maps(f2)
+        walk = refine_random_walk(
+            f1,
+            f2,
+            transform,
+            config=config.final_random_walk,
+            rng=rng,
+            distances1=fd1,
+            distances2=fd2,
+        )
+        transform = np.asarray(walk.transform, dtype=np.float64)
+        psi = float(walk.psi)
+        agreement = acceptance_index(f1, f2, transform, distances1=fd1, distances2=fd2)
+    else:
+        psi = float(dissimilarity(w1, w2, transform, distances1=d1, distances2=d2))
+    seconds["final_refine"] = time.perf_counter() - tick
+
+    tick = time.perf_counter()
+    fused = fuse_maps(m1, _at_resolution(m2, m1.resolution), transform)
+    seconds["fuse"] = time.perf_counter() - tick
+    seconds["total"] = time.perf_counter() - started
+    runner_up = next(
+        (
+            o
+            for o in scored[1:]
+            if not same_answer(best.map1_from_map2, o.map1_from_map2, pivot, config)
+        ),
+        None,
+    )
+    margin = "" if runner_up is None else f", next different candidate {runner_up.score:.1f} m²"
+    return MergeResult(
+        transform=transform,
+        reason=(
+            f"merged: acceptance index {agreement.index:.3f}, overlap "
+            f"{agreement.overlap * fine**2:.1f} m², score {best.score:.1f} m²{margin}"
+        ),
+        hypotheses=scored,
+        chosen=replace(best, map1_from_map2=transform),
+        fused=fused,
+        agreement=agreement,
+        psi=psi,
+        seconds=seconds,
+        trace=merge_trace,
+    )
+
+
+def relative_transform_error(
+    estimate: FloatArray, truth: FloatArray, pivot: FloatArray | None = None
+) -> tuple[float, float]:
+    """Translation error (m) and absolute rotation error (rad) of ``estimate`` against
+    ``truth`` (both ``map1_from_map2``): the translation of ``inverse(truth) ∘ estimate``
+    measured at ``pivot`` (a point of m2; default its frame's origin)."""
+    from mrslam_env.geometry import compose, transform_points
+
+    error = compose(inverse(truth), estimate)
+    point = np.zeros(2) if pivot is None else np.asarray(pivot, dtype=np.float64)
+    moved = transform_points(error, point[None, :])[0] - point
+    return float(np.hypot(*moved)), abs(wrap_scalar(float(error[2])))
