@@ -138,8 +138,9 @@ def _cmd_merge(args: argparse.Namespace) -> int:
     from mrslam_env.merge.pipeline import merge_maps
 
     m1, m2 = load_map(args.map1), load_map(args.map2)
-    if args.output is not None and not args.output.parent.is_dir():
-        raise ValueError(f"output folder {args.output.parent} does not exist")
+    for path in (args.output, args.rrd):
+        if path is not None and not path.parent.is_dir():
+            raise ValueError(f"output folder {path.parent} does not exist")
     result = merge_maps(m1, m2, rng=np.random.default_rng(args.seed), trace=args.rrd is not None)
     if args.rrd is not None:
         from mrslam_env.recording import Recorder

@@ -83,8 +83,8 @@ class MergeConfig:
         )
     )
     """The last refinement, at the input resolution."""
-    candidates: int = 6
-    """How many of the ranked hypotheses are refined and judged."""
+    candidates: int = 4
+    """How many of each direction's ranked hypotheses are refined and judged."""
     min_acceptance_index: float = 0.9
     """A confident merge agrees on at least this fraction of the cells known in both."""
     max_conflict_fraction: float = 0.01
@@ -94,9 +94,12 @@ class MergeConfig:
     """... and overlaps on at least this many m²."""
     conflict_weight: float = 10.0
     """Score of a candidate: ``(agree - conflict_weight * conflicts) * cell area`` (m²)."""
-    ambiguity_ratio: float = 0.8
+    ambiguity_ratio: float = 0.25
     """Refuse when a confident candidate that is a *different* transform scores at least
-    this fraction of the best one."""
+    this fraction of the best one. Low on purpose: in repetitive buildings (shelf aisles,
+    mirrored wings) the wrong placement often overlaps *more* than the right one and
+    scores higher, so only "a second consistent answer exists at all" is a safe signal;
+    the live system settles such cases by rendezvous instead."""
     distinct_translation: float = 0.5
     """Two transforms are the same answer when they move m2's known centre less than this
     (m) apart ..."""
@@ -105,31 +108,47 @@ class MergeConfig:
 
     def __post_init__(self) -> None:
         name = type(self).__name__
+
+        def number(attr: str) -> float:
+            value = getattr(self, attr)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ValueError(f"{name}.{attr} must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise ValueError(f"{name}.{attr} must be finite, got {value!r}")
+            return float(value)
+
         for attr in (
             "working_resolution",
-            "max_resolution_ratio",
             "min_known_area",
             "min_overlap_area",
             "distinct_translation",
             "distinct_rotation",
         ):
-            value = getattr(self, attr)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name}.{attr} must be a finite number > 0, got {value!r}")
+            if number(attr) <= 0:
+                raise ValueError(f"{name}.{attr} must be > 0, got {getattr(self, attr)!r}")
+        if number("max_resolution_ratio") < 1.0:
+            raise ValueError(
+                f"{name}.max_resolution_ratio must be >= 1, got {self.max_resolution_ratio!r}"
+            )
+        if number("conflict_weight") < 0:
+            raise ValueError(f"{name}.conflict_weight must be >= 0, got {self.conflict_weight!r}")
+        for attr in ("min_acceptance_index", "max_conflict_fraction", "ambiguity_ratio"):
+            if not 0.0 <= number(attr) <= 1.0:
+                raise ValueError(f"{name}.{attr} must be in [0, 1], got {getattr(self, attr)!r}")
         for attr in ("max_working_cells", "candidates"):
             value = getattr(self, attr)
             if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
                 raise ValueError(f"{name}.{attr} must be an int >= 1, got {value!r}")
-        for attr in ("min_acceptance_index", "max_conflict_fraction", "ambiguity_ratio"):
+        for attr, kind in (
+            ("virtual", VirtualRobotConfig),
+            ("mcl", MclConfig),
+            ("pooling", HypothesisConfig),
+            ("random_walk", RandomWalkConfig),
+            ("final_random_walk", RandomWalkConfig),
+        ):
             value = getattr(self, attr)
-            if not (isinstance(value, int | float) and 0.0 <= value <= 1.0):
-                raise ValueError(f"{name}.{attr} must be in [0, 1], got {value!r}")
-        if not (math.isfinite(self.conflict_weight) and self.conflict_weight >= 0):
-            raise ValueError(f"{name}.conflict_weight must be >= 0, got {self.conflict_weight!r}")
-        if self.max_resolution_ratio < 1.0:
-            raise ValueError(
-                f"{name}.max_resolution_ratio must be >= 1, got {self.max_resolution_ratio!r}"
-            )
+            if not isinstance(value, kind):
+                raise ValueError(f"{name}.{attr} must be a {kind.__name__}, got {value!r}")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -391,6 +410,42 @@ def _score_candidate(
 # --- the pipeline ----------------------------------------------------------------------------
 
 
+def _propose(
+    w1: GridMap,
+    w2: GridMap,
+    pivot: FloatArray,
+    config: MergeConfig,
+    rng: np.random.Generator,
+    trace: bool,
+    seconds: dict[str, float],
+) -> tuple[HypothesisSet, list[tuple[FloatArray, float, int]]]:
+    """Hypotheses from both directions: the virtual robot drives in m1 and localises in
+    m2, and the other way round (inverted). A run only localises where the two maps
+    overlap; when one map is much larger, few of its runs fall in the shared part, while
+    the smaller map's runs mostly do. The two ranked lists are interleaved and
+    duplicates (:func:`same_answer`) dropped; at most ``candidates`` from each."""
+    forward = generate_hypotheses(
+        w1, w2, virtual=config.virtual, mcl=config.mcl, pooling=config.pooling, rng=rng,
+        trace=trace,
+    )  # fmt: skip
+    backward = generate_hypotheses(
+        w2, w1, virtual=config.virtual, mcl=config.mcl, pooling=config.pooling, rng=rng
+    )
+    for name, found in (("forward", forward), ("backward", backward)):
+        for stage, value in found.timings.items():
+            seconds[f"hypotheses.{name}.{stage}"] = value
+    ahead = [(h.map1_from_map2, h.support, h.votes) for h in forward.hypotheses]
+    behind = [(inverse(h.map1_from_map2), h.support, h.votes) for h in backward.hypotheses]
+    initials: list[tuple[FloatArray, float, int]] = []
+    for k in range(config.candidates):
+        for ranked in (ahead, behind):
+            if k < len(ranked) and not any(
+                same_answer(ranked[k][0], kept[0], pivot, config) for kept in initials
+            ):
+                initials.append(ranked[k])
+    return forward, initials
+
+
 def merge_maps(
     m1: GridMap,
     m2: GridMap,
@@ -441,40 +496,27 @@ def merge_maps(
     tick = time.perf_counter()
     resolution = _working_resolution(m1, m2, config)
     w1, w2 = _at_resolution(m1, resolution), _at_resolution(m2, resolution)
+    for name, working in (("map 1", w1), ("map 2", w2)):
+        if not working.free.any():
+            raise MergeInputError(
+                f"{name} has no free space left at the working resolution {resolution:g} m "
+                "(only scattered free cells)"
+            )
     d1, d2 = distance_maps(w1), distance_maps(w2)
     seconds["prepare"] = time.perf_counter() - tick
 
     tick = time.perf_counter()
-    proposals = generate_hypotheses(
-        w1,
-        w2,
-        virtual=config.virtual,
-        mcl=config.mcl,
-        pooling=config.pooling,
-        rng=rng,
-        trace=trace,
-    )
+    pivot = w2.cell_to_world(np.argwhere(~w2.unknown).mean(axis=0)[None, :])[0]
+    proposals, initials = _propose(w1, w2, pivot, config, rng, trace, seconds)
     seconds["hypotheses"] = time.perf_counter() - tick
-    for stage, value in proposals.timings.items():
-        seconds[f"hypotheses.{stage}"] = value
 
     tick = time.perf_counter()
-    pivot = w2.cell_to_world(np.argwhere(~w2.unknown).mean(axis=0)[None, :])[0]
     scored: list[ScoredHypothesis] = []
     walks: list[RandomWalkResult] = []
     reasons: list[str] = []
-    for hypothesis in proposals.hypotheses[: config.candidates]:
+    for transform, support, votes in initials:
         candidate, walk, why = _score_candidate(
-            w1,
-            w2,
-            d1,
-            d2,
-            hypothesis.map1_from_map2,
-            hypothesis.support,
-            hypothesis.votes,
-            config,
-            rng,
-            trace,
+            w1, w2, d1, d2, transform, support, votes, config, rng, trace
         )
         scored.append(candidate)
         walks.append(walk)
@@ -553,11 +595,11 @@ def merge_maps(
         (
             o
             for o in scored[1:]
-            if not same_answer(best.map1_from_map2, o.map1_from_map2, pivot, config)
+            if o.confident and not same_answer(best.map1_from_map2, o.map1_from_map2, pivot, config)
         ),
         None,
     )
-    margin = "" if runner_up is None else f", next different candidate {runner_up.score:.1f} m²"
+    margin = "" if runner_up is None else f", next confident candidate {runner_up.score:.1f} m²"
     return MergeResult(
         transform=transform,
         reason=(

@@ -1,0 +1,408 @@
+"""``merge_maps`` end to end (DESIGN §5): the pipeline's invariants and its verdicts.
+
+- The issue's invariant: a realistic partial map merged with the same observation expressed
+  in a frame turned by any angle (all round the circle) and shifted off the lattice is
+  recovered within one cell and one degree.
+- Realistic partial overlaps of the built-in buildings are merged within 0.1 m and 1°;
+  pairs that do not overlap come back "no confident merge"; the fused map holds both maps.
+- Bad input raises a one-line :class:`MergeInputError`; resolutions within the limit and
+  very large maps are handled; the result depends on the seed only.
+
+Each merge takes about a second, so the maps and results are module-scoped fixtures shared
+by the tests that inspect them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from merge_fixtures import map_pair, poses_near, scan_map
+
+from mrslam_env.geometry import compose, inverse, transform_points
+from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
+from mrslam_env.merge.dissimilarity import acceptance_index
+from mrslam_env.merge.fuse import resample_map
+from mrslam_env.merge.pipeline import (
+    MergeConfig,
+    MergeInputError,
+    MergeResult,
+    merge_maps,
+    relative_transform_error,
+)
+from mrslam_env.worlds import build_world
+
+ONE_DEGREE = math.radians(1.0)
+MERGE_TOLERANCE_M = 0.1  # realistic partial overlaps: translation error at m2's centre
+SEED = 0
+
+
+def known_centroid(grid: GridMap) -> np.ndarray:
+    """The centre (x, y) of a map's known cells in its own frame: the error pivot."""
+    return grid.cell_to_world(np.argwhere(~grid.unknown).mean(axis=0)[None, :])[0]
+
+
+def errors(result: MergeResult, truth: np.ndarray, m2: GridMap) -> tuple[float, float]:
+    assert result.transform is not None, result.reason
+    return relative_transform_error(result.transform, truth, known_centroid(m2))
+
+
+# -- 1. the invariant: a known warp of the same observation is recovered -------------------
+
+# Quarter turns are lattice-exact for the grid frames; the others are not. Every shift is
+# off the 0.05 m lattice.
+WARPS = [
+    (0.0, (1.37, -0.61)),
+    (45.0, (-2.13, 0.83)),
+    (-45.0, (0.42, 1.91)),
+    (90.0, (1.37, -0.61)),
+    (-90.0, (-0.77, -1.53)),
+    (135.0, (2.61, 0.29)),
+    (-135.0, (-1.18, 2.07)),
+    (180.0, (0.93, -2.44)),
+]
+
+
+@dataclass(frozen=True)
+class Observation:
+    """One set of scans of the office, made into map 1 in the frame ``world_from_map1``."""
+
+    world: object
+    poses: np.ndarray
+    world_from_map1: np.ndarray
+    m1: GridMap
+
+
+@pytest.fixture(scope="module")
+def office_observation() -> Observation:
+    world = build_world("office")
+    poses = poses_near(world, (9.0, 8.0), 4.0, 12, np.random.default_rng(1))
+    world_from_map1 = np.array([9.0, 8.0, 0.3])
+    return Observation(world, poses, world_from_map1, scan_map(world, poses, world_from_map1))
+
+
+@pytest.mark.parametrize(("degrees", "shift"), WARPS, ids=[f"{d:+.0f}deg" for d, _ in WARPS])
+def test_merging_a_warped_copy_recovers_the_warp(
+    office_observation: Observation, degrees: float, shift: tuple[float, float]
+) -> None:
+    obs = office_observation
+    # The same scans made into a map in another frame: an exact warp, no resampling.
+    world_from_map2 = compose(obs.world_from_map1, np.array([*shift, math.radians(degrees)]))
+    m2 = scan_map(obs.world, obs.poses, world_from_map2)
+    truth = compose(inverse(obs.world_from_map1), world_from_map2)
+
+    result = merge_maps(obs.m1, m2, rng=SEED)
+
+    assert result.merged and result.reason.startswith("merged"), result.reason
+    translation, rotation = errors(result, truth, m2)
+    assert translation <= obs.m1.resolution, f"{translation:.4f} m"
+    assert rotation <= ONE_DEGREE, f"{math.degrees(rotation):.3f} deg"
+    # The answer is the best-ranked, confident hypothesis, and the maps agree under it.
+    assert result.chosen is not None and result.chosen.confident
+    np.testing.assert_array_equal(result.chosen.map1_from_map2, result.transform)
+    assert result.hypotheses[0].confident
+    assert result.agreement is not None and result.agreement.index >= 0.95
+    assert result.fused is not None and math.isfinite(result.psi)
+
+
+# -- 2. realistic partial overlaps, and pairs that do not overlap ---------------------------
+
+# scenario, window centre of map 1, of map 2, true map1_from_map2; overlaps of 48-62 %.
+OVERLAPPING = {
+    "office": ("office", (14.0, 12.0), (19.0, 11.0), (-2.2, 0.7, -2.5)),
+    "warehouse": ("warehouse", (6.0, 6.0), (11.0, 7.0), (0.4, -1.7, 2.9)),
+    "maze": ("maze", (5.0, 5.0), (9.0, 7.0), (1.1, -0.4, -1.9)),
+}
+
+
+@dataclass(frozen=True)
+class MergedPair:
+    m1: GridMap
+    m2: GridMap
+    truth: np.ndarray
+    result: MergeResult
+
+
+@pytest.fixture(scope="module", params=sorted(OVERLAPPING))
+def overlapping(request: pytest.FixtureRequest) -> MergedPair:
+    scenario, centre1, centre2, truth = OVERLAPPING[request.param]
+    m1, m2 = map_pair(scenario, centre1, centre2, np.array(truth))
+    return MergedPair(m1, m2, np.array(truth), merge_maps(m1, m2, rng=SEED))
+
+
+def test_partial_overlap_is_merged_within_tolerance(overlapping: MergedPair) -> None:
+    pair = overlapping
+    # The case is what it claims: a partial overlap, consistent under the truth.
+    truth_agreement = acceptance_index(pair.m1, pair.m2, pair.truth)
+    assert 0.4 <= truth_agreement.overlap_fraction <= 0.7
+    assert pair.result.merged, pair.result.reason
+    translation, rotation = errors(pair.result, pair.truth, pair.m2)
+    assert translation <= MERGE_TOLERANCE_M, f"{translation:.4f} m"
+    assert rotation <= ONE_DEGREE, f"{math.degrees(rotation):.3f} deg"
+
+
+def test_result_reports_ranked_hypotheses_and_timings(overlapping: MergedPair) -> None:
+    result = overlapping.result
+    assert result.hypotheses and result.chosen is not None
+    ranks = [(not h.confident, -h.score) for h in result.hypotheses]
+    assert ranks == sorted(ranks)
+    for hypothesis in result.hypotheses:
+        assert 0.0 <= hypothesis.acceptance_index <= 1.0
+        assert 0.0 <= hypothesis.overlap <= 1.0
+        assert hypothesis.votes >= 1 and hypothesis.map1_from_map2.shape == (3,)
+    assert result.agreement is not None and result.agreement.index >= 0.9
+    assert {"prepare", "hypotheses", "judge", "fuse", "total"} <= set(result.seconds)
+    assert all(v >= 0.0 for v in result.seconds.values())
+    report = result.as_dict()
+    assert report["transform"] == dict(
+        zip(["x", "y", "theta"], map(float, result.transform), strict=True)
+    )
+    assert report["acceptance_index"] == pytest.approx(result.agreement.index, abs=1e-4)
+
+
+def _m1_block(fused: GridMap, m1: GridMap) -> np.ndarray:
+    """The fused cells over m1's grid (the fused map is on m1's lattice, grown)."""
+    offset = (np.asarray(m1.origin) - np.asarray(fused.origin)) / fused.resolution
+    col0, row0 = np.rint(offset).astype(int)
+    np.testing.assert_allclose(offset, [col0, row0], atol=1e-6)  # on m1's lattice
+    rows, cols = m1.shape
+    return fused.cells[row0 : row0 + rows, col0 : col0 + cols]
+
+
+def test_fused_map_holds_both_maps(overlapping: MergedPair) -> None:
+    m1, m2, result = overlapping.m1, overlapping.m2, overlapping.result
+    fused = result.fused
+    assert fused is not None and fused.resolution == m1.resolution
+    block = _m1_block(fused, m1)
+    # m1 is kept: every known cell stays known, every wall stays a wall.
+    assert np.all(block[~m1.unknown] != UNKNOWN)
+    assert np.all(block[m1.occupied] == OCCUPIED)
+    assert acceptance_index(fused, m1, np.zeros(3)).index >= 0.98
+    # m2's known cells, placed by the answer, are known in the fused map and agree.
+    centres = transform_points(result.transform, m2.cell_to_world(np.argwhere(~m2.unknown)))
+    cells = fused.world_to_cell(centres)
+    assert fused.contains(cells).all()
+    assert np.mean(fused.cells[cells[:, 0], cells[:, 1]] != UNKNOWN) >= 0.99
+    assert acceptance_index(fused, m2, result.transform).index >= 0.95
+    # It grew: more known area than either map, less than both together.
+    known = np.count_nonzero(~fused.unknown)
+    known1, known2 = np.count_nonzero(~m1.unknown), np.count_nonzero(~m2.unknown)
+    assert max(known1, known2) < known < known1 + known2
+
+
+def _scanned(scenario: str, centre: tuple[float, float], frame_theta: float, seed: int) -> GridMap:
+    world = build_world(scenario)
+    poses = poses_near(world, centre, 4.0, 12, np.random.default_rng(seed))
+    return scan_map(world, poses, np.array([*centre, frame_theta]))
+
+
+FAR_TRUTH = np.array([1.0, 2.0, 0.5])
+NOT_OVERLAPPING = {
+    # far-apart windows of one building: no cell in common under the truth ...
+    "office-far": lambda: map_pair("office", (4, 4), (23, 12), FAR_TRUTH),
+    "maze-far": lambda: map_pair("maze", (3, 3), (18, 13), FAR_TRUTH),
+    # ... and two different buildings
+    "office-vs-warehouse": lambda: (
+        _scanned("office", (14.0, 12.0), 0.3, 1),
+        _scanned("warehouse", (6.0, 6.0), -1.0, 2),
+    ),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(NOT_OVERLAPPING))
+def not_overlapping(request: pytest.FixtureRequest) -> tuple[str, GridMap, GridMap, MergeResult]:
+    m1, m2 = NOT_OVERLAPPING[request.param]()
+    return request.param, m1, m2, merge_maps(m1, m2, rng=SEED)
+
+
+def test_no_overlap_is_no_confident_merge(
+    not_overlapping: tuple[str, GridMap, GridMap, MergeResult],
+) -> None:
+    case, m1, m2, result = not_overlapping
+    if case.endswith("-far"):  # the case is what it claims
+        assert acceptance_index(m1, m2, FAR_TRUTH).overlap == 0
+    assert result.transform is None
+    assert not result.merged
+    assert result.reason.startswith("no confident merge"), result.reason
+    assert "\n" not in result.reason
+    assert result.chosen is None and result.fused is None and result.agreement is None
+    assert math.isnan(result.psi)
+    report = result.as_dict()
+    assert report["transform"] is None and report["reason"] == result.reason
+    # Refusing still reports what was tried.
+    assert len(report["hypotheses"]) == len(result.hypotheses)
+
+
+# -- 3. bad input, resolutions, large maps, determinism, configuration ----------------------
+
+
+@pytest.fixture(scope="module")
+def warehouse_pair() -> tuple[GridMap, GridMap, np.ndarray]:
+    scenario, centre1, centre2, truth = OVERLAPPING["warehouse"]
+    m1, m2 = map_pair(scenario, centre1, centre2, np.array(truth))
+    return m1, m2, np.array(truth)
+
+
+def _filled(value: np.int8, shape: tuple[int, int] = (60, 60), resolution: float = 0.05) -> GridMap:
+    return GridMap(cells=np.full(shape, value, dtype=np.int8), resolution=resolution)
+
+
+def _tiny() -> GridMap:
+    cells = np.full((60, 60), UNKNOWN, dtype=np.int8)
+    cells[25:35, 25:35] = FREE  # 0.25 m² known
+    return GridMap(cells=cells, resolution=0.05)
+
+
+BAD_MAPS = {
+    "zero cells": (lambda: _filled(UNKNOWN, (0, 0)), "is empty"),
+    "tiny known area": (_tiny, "knows only 0.25 m²"),
+    "all unknown": (lambda: _filled(UNKNOWN), "all unknown"),
+    "all occupied": (lambda: _filled(OCCUPIED), "no free space"),
+    "not a grid": (lambda: np.zeros((60, 60), dtype=np.int8), "must be a GridMap"),
+}
+
+
+@pytest.mark.parametrize("which", [1, 2])
+@pytest.mark.parametrize("case", sorted(BAD_MAPS))
+def test_bad_map_is_a_one_line_input_error(
+    warehouse_pair: tuple[GridMap, GridMap, np.ndarray], case: str, which: int
+) -> None:
+    make, problem = BAD_MAPS[case]
+    good = warehouse_pair[0]
+    maps = (make(), good) if which == 1 else (good, make())
+    with pytest.raises(MergeInputError) as caught:
+        merge_maps(*maps)
+    message = str(caught.value)
+    assert isinstance(caught.value, ValueError)
+    assert message.startswith(f"map {which} ") and problem in message, message
+    assert "\n" not in message
+
+
+def test_resolutions_too_far_apart_are_refused(
+    warehouse_pair: tuple[GridMap, GridMap, np.ndarray],
+) -> None:
+    m1, m2, _ = warehouse_pair
+    coarse = resample_map(m2, 0.25)  # 5x coarser than m1's 0.05 m
+    with pytest.raises(MergeInputError, match=r"resolutions 0\.05 m and 0\.25 m differ by 5\.0x"):
+        merge_maps(m1, coarse)
+    with pytest.raises(MergeInputError, match=r"differ by 5\.0x"):
+        merge_maps(coarse, m1)
+
+
+def test_different_resolutions_within_the_limit_merge(
+    warehouse_pair: tuple[GridMap, GridMap, np.ndarray],
+) -> None:
+    m1, m2, truth = warehouse_pair
+    coarse2 = resample_map(m2, 0.1)
+    result = merge_maps(m1, coarse2, rng=SEED)
+    translation, rotation = errors(result, truth, coarse2)
+    assert translation <= MERGE_TOLERANCE_M and rotation <= ONE_DEGREE
+    assert result.fused is not None and result.fused.resolution == pytest.approx(0.05)
+
+
+def _padded(grid: GridMap, shape: tuple[int, int], at: tuple[int, int]) -> GridMap:
+    """``grid`` inside a larger all-unknown grid, its cells at the same world places."""
+    cells = np.full(shape, UNKNOWN, dtype=np.int8)
+    row0, col0 = at
+    rows, cols = grid.shape
+    cells[row0 : row0 + rows, col0 : col0 + cols] = grid.cells
+    origin = (grid.origin[0] - col0 * grid.resolution, grid.origin[1] - row0 * grid.resolution)
+    return GridMap(cells=cells, resolution=grid.resolution, origin=origin)
+
+
+def test_very_large_map_is_merged_coarse_to_fine(
+    warehouse_pair: tuple[GridMap, GridMap, np.ndarray],
+) -> None:
+    m1, m2, truth = warehouse_pair
+    large1 = _padded(m1, (1500, 1500), (600, 500))  # 75 m x 75 m at 0.05 m
+    config = MergeConfig()
+    result = merge_maps(large1, m2, config, rng=SEED, trace=True)
+    translation, rotation = errors(result, truth, m2)
+    assert translation <= MERGE_TOLERANCE_M and rotation <= ONE_DEGREE
+    # Hypotheses were made on coarser working maps that fit the budget ...
+    assert result.trace is not None
+    working = result.trace.working1
+    assert working.resolution > config.working_resolution
+    assert working.cells.size <= config.max_working_cells
+    # ... and the answer was refined and fused at the input resolution.
+    assert result.fused is not None and result.fused.resolution == pytest.approx(0.05)
+    assert result.fused.shape[0] >= 1500 and result.fused.shape[1] >= 1500
+
+
+def test_same_seed_gives_the_same_result(
+    warehouse_pair: tuple[GridMap, GridMap, np.ndarray],
+) -> None:
+    m1, m2, _ = warehouse_pair
+    cells1, cells2 = m1.cells.copy(), m2.cells.copy()
+    # An int seed and a generator seeded with it are the same randomness.
+    first = merge_maps(m1, m2, rng=7)
+    second = merge_maps(m1, m2, rng=np.random.default_rng(7))
+    assert first.transform is not None and second.transform is not None
+    np.testing.assert_array_equal(first.transform, second.transform)
+    assert first.reason == second.reason
+    assert first.psi == second.psi
+    assert [h.as_dict() for h in first.hypotheses] == [h.as_dict() for h in second.hypotheses]
+    assert first.fused is not None and second.fused is not None
+    np.testing.assert_array_equal(first.fused.cells, second.fused.cells)
+    # The inputs are left alone.
+    np.testing.assert_array_equal(m1.cells, cells1)
+    np.testing.assert_array_equal(m2.cells, cells2)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("working_resolution", 0.0),
+        ("working_resolution", -0.1),
+        ("working_resolution", math.nan),
+        ("max_working_cells", 0),
+        ("max_working_cells", 1.5),
+        ("candidates", 0),
+        ("candidates", True),
+        ("max_resolution_ratio", 0.5),
+        ("min_known_area", 0.0),
+        ("min_overlap_area", -3.0),
+        ("min_acceptance_index", 1.5),
+        ("max_conflict_fraction", -0.01),
+        ("ambiguity_ratio", 2.0),
+        ("conflict_weight", -1.0),
+        ("distinct_rotation", math.inf),
+    ],
+)
+def test_config_out_of_range_is_a_value_error_naming_the_field(field: str, value: object) -> None:
+    with pytest.raises(ValueError, match=rf"MergeConfig\.{field} .*{value!r}"):
+        MergeConfig(**{field: value})
+
+
+@pytest.mark.parametrize(("field", "value"), [("conflict_weight", "10"), ("virtual", 3)])
+def test_config_of_the_wrong_type_is_a_value_error_naming_the_field(
+    field: str, value: object
+) -> None:
+    with pytest.raises(ValueError, match=rf"MergeConfig\.{field}"):
+        MergeConfig(**{field: value})
+
+
+def _isolated_free_cells() -> GridMap:
+    """25 m² of walls with free cells that touch no other free cell: free space at the
+    map's own 0.05 m, none left at the 0.1 m working resolution (occupied wins)."""
+    cells = np.full((100, 100), OCCUPIED, dtype=np.int8)
+    cells[1::3, 1::3] = FREE
+    return GridMap(cells=cells, resolution=0.05)
+
+
+def test_free_space_lost_at_working_resolution_is_input_error_or_refusal(
+    warehouse_pair: tuple[GridMap, GridMap, np.ndarray],
+) -> None:
+    sparse = _isolated_free_cells()
+    assert sparse.free.any()  # passes the input check
+    try:
+        result = merge_maps(warehouse_pair[0], sparse, rng=SEED)
+    except MergeInputError as error:
+        assert str(error).startswith("map 2 ")
+    except ValueError as error:
+        raise AssertionError(f"plain ValueError escaped merge_maps: {error}") from error
+    else:
+        assert result.transform is None
+        assert result.reason.startswith("no confident merge")

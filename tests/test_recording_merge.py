@@ -1,0 +1,302 @@
+"""``Recorder.log_merge``: the merge stages under ``merge/*`` (DESIGN §7), read back.
+
+A merge made with ``trace=True`` is logged into a temporary ``.rrd`` file and read back with
+Rerun's own reader (the ``Recording`` helper of ``test_recording``): the entity paths, that
+everything drawn in the ``merge`` view lines up in map 1's frame (the inputs, the fused
+map, skeletons, virtual runs and scans, MCL particles, hypotheses, the random walk), the
+scalars, and a refusal's recording. ``mrslam merge --rrd`` writes the same entities.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from merge_fixtures import map_pair
+from scipy import ndimage
+from test_recording import Recording
+
+from mrslam_env.geometry import inverse, transform_points
+from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
+from mrslam_env.mapio import load_map, save_map
+from mrslam_env.merge.pipeline import MergeResult, merge_maps
+from mrslam_env.recording import Recorder, scan_hits_world
+from scenarios.cli import main
+
+STEP, SIM_TIME = 5, 0.5
+TRUTH = np.array([1.1, -0.4, -1.9])  # maze windows overlapping by about 60 %
+MERGE_ENTITIES = {
+    "/merge/map1",
+    "/merge/map2",
+    "/merge/skeleton/map1",
+    "/merge/skeleton/map2",
+    "/merge/virtual_robot/path",
+    "/merge/virtual_robot/scan",
+    "/merge/mcl/particles",
+    "/merge/hypotheses",
+    "/merge/refine/candidate",
+    "/merge/refine/best",
+    "/merge/result",
+    "/metrics/merge/psi",
+    "/metrics/merge/acceptance_index",
+}
+PIXEL = {FREE: 254, OCCUPIED: 0, UNKNOWN: 205}  # recording.occupancy_image's grey levels
+
+
+@dataclass(frozen=True)
+class Logged:
+    m1: GridMap
+    m2: GridMap
+    result: MergeResult
+    recording: Recording
+
+
+def _log(path: Path, result: MergeResult, m1: GridMap, m2: GridMap) -> Recording:
+    with Recorder(path, n_robots=2) as recorder:
+        recorder.set_time(STEP, SIM_TIME)
+        recorder.log_merge(result, m1, m2)
+        recorder.log_event("after the merge")
+    return Recording(path)
+
+
+@pytest.fixture(scope="module")
+def merged(tmp_path_factory: pytest.TempPathFactory) -> Logged:
+    m1, m2 = map_pair("maze", (5.0, 5.0), (9.0, 7.0), TRUTH)
+    result = merge_maps(m1, m2, rng=0, trace=True)
+    assert result.merged and result.trace is not None, result.reason
+    path = tmp_path_factory.mktemp("merge") / "merge.rrd"
+    return Logged(m1, m2, result, _log(path, result, m1, m2))
+
+
+@pytest.fixture(scope="module")
+def refused(tmp_path_factory: pytest.TempPathFactory) -> Logged:
+    m1, m2 = map_pair("office", (4.0, 4.0), (23.0, 12.0), np.array([1.0, 2.0, 0.5]))
+    result = merge_maps(m1, m2, rng=0, trace=True)
+    assert not result.merged, result.reason
+    path = tmp_path_factory.mktemp("refused") / "refused.rrd"
+    return Logged(m1, m2, result, _log(path, result, m1, m2))
+
+
+def only(recording: Recording, entity: str, column: str) -> Any:
+    (row,) = recording.at_step(entity, column, STEP)
+    return row
+
+
+def grid_image(recording: Recording, entity: str) -> np.ndarray:
+    """A logged GridMap's grey image with row 0 = lowest y (as our grids)."""
+    fmt = recording.column(entity, "GridMap:format")[0][0]
+    data = np.array(recording.column(entity, "GridMap:data")[0][0], dtype=np.uint8)
+    return data.reshape(fmt["height"], fmt["width"])[::-1]
+
+
+# -- what is in the file ---------------------------------------------------------------------
+
+
+def test_merge_entities_are_recorded(merged: Logged) -> None:
+    assert set(merged.recording.chunks) >= MERGE_ENTITIES
+    assert "/metrics/merge/seconds" in merged.recording.chunks
+
+
+def test_single_shot_entities_are_at_the_current_step(merged: Logged) -> None:
+    recording = merged.recording
+    for entity, column in [
+        ("/merge/map1", "GridMap:translation"),
+        ("/merge/result", "GridMap:translation"),
+        ("/merge/hypotheses", "Arrows2D:origins"),
+        ("/merge/refine/best", "Arrows2D:origins"),
+        ("/metrics/merge/psi", "Scalars:scalars"),
+    ]:
+        assert recording.column(entity, "step") == [STEP], entity
+        assert recording.at_step(entity, column, STEP), entity
+    # The iteration timeline is reset afterwards: later data is on step / sim_time only.
+    for batch in recording.batches("/events"):
+        assert "merge_iteration" not in batch.schema.names
+    texts = [t[0] for t in recording.column("/events", "TextLog:text")]
+    assert texts == [merged.result.reason, "after the merge"]
+
+
+def test_inputs_and_fused_map_line_up_in_map1_frame(merged: Logged) -> None:
+    recording, m1, m2, result = merged.recording, merged.m1, merged.m2, merged.result
+    assert result.transform is not None and result.fused is not None
+    # Map 1 and the fused map are drawn as they are: in map 1's frame, unturned.
+    for entity, grid in (("/merge/map1", m1), ("/merge/result", result.fused)):
+        (translation,) = only(recording, entity, "GridMap:translation")
+        (rotation,) = only(recording, entity, "GridMap:rotation_axis_angle")
+        np.testing.assert_allclose(translation, [*grid.origin, 0.0], atol=1e-6)
+        assert rotation["angle"] == pytest.approx(0.0, abs=1e-9)
+        assert only(recording, entity, "GridMap:cell_size") == [pytest.approx(m1.resolution)]
+    # The fused grid is m1's lattice grown by whole cells ...
+    fused = result.fused
+    offset = (np.asarray(m1.origin) - np.asarray(fused.origin)) / fused.resolution
+    col0, row0 = np.rint(offset).astype(int)
+    np.testing.assert_allclose(offset, [col0, row0], atol=1e-6)
+    # ... so its image, where map 1 has walls, shows walls at the same places.
+    image = grid_image(recording, "/merge/result")
+    assert image.shape == fused.shape
+    block = image[row0 : row0 + m1.shape[0], col0 : col0 + m1.shape[1]]
+    assert np.all(block[m1.occupied] == PIXEL[OCCUPIED])
+    assert np.all(block[~m1.unknown] != PIXEL[UNKNOWN])
+    np.testing.assert_array_equal(image == PIXEL[OCCUPIED], fused.occupied)
+    # Map 2 is placed by the answer: its corner moved, its axes turned.
+    (translation,) = only(recording, "/merge/map2", "GridMap:translation")
+    (rotation,) = only(recording, "/merge/map2", "GridMap:rotation_axis_angle")
+    corner = transform_points(result.transform, np.array([m2.origin]))[0]
+    np.testing.assert_allclose(translation, [*corner, 0.0], atol=1e-5)
+    assert rotation["angle"] == pytest.approx(result.transform[2], abs=1e-6)
+
+
+def test_skeletons_and_virtual_runs_lie_on_map1_free_space(merged: Logged) -> None:
+    recording, result = merged.recording, merged.result
+    assert result.trace is not None
+    working1 = result.trace.working1
+
+    def cells_of(points: np.ndarray, grid: GridMap) -> np.ndarray:
+        cells = grid.world_to_cell(points)
+        assert grid.contains(cells).all()
+        return grid.cells[cells[:, 0], cells[:, 1]]
+
+    skeleton1 = only(recording, "/merge/skeleton/map1", "Points2D:positions")
+    skeleton1 = np.asarray(skeleton1, dtype=np.float64)
+    assert len(skeleton1) == np.count_nonzero(result.trace.hypotheses.skeleton1.skeleton)
+    assert np.all(cells_of(skeleton1, working1) == FREE)
+    # Map 2's skeleton is drawn where the answer puts it: on map 2's free space.
+    skeleton2 = only(recording, "/merge/skeleton/map2", "Points2D:positions")
+    assert result.transform is not None
+    back = transform_points(inverse(result.transform), np.asarray(skeleton2, dtype=np.float64))
+    assert np.mean(cells_of(back, result.trace.working2) == FREE) >= 0.999
+    # One strip per virtual run, through its poses, on map 1's free space.
+    runs = result.trace.hypotheses.runs
+    strips = only(recording, "/merge/virtual_robot/path", "LineStrips2D:strips")
+    assert len(strips) == len(runs) >= 2
+    for strip, run in zip(strips, runs, strict=True):
+        np.testing.assert_allclose(strip, run.poses_in_map1[:, :2], atol=1e-5)
+        assert np.all(cells_of(np.asarray(strip, dtype=np.float64), working1) == FREE)
+
+
+def test_virtual_scans_hit_map1_walls(merged: Logged) -> None:
+    recording, result = merged.recording, merged.result
+    assert result.trace is not None
+    runs = result.trace.hypotheses.runs
+    rows = recording.column("/merge/virtual_robot/scan", "Points2D:positions")
+    iterations = recording.column("/merge/virtual_robot/scan", "merge_iteration")
+    assert len(rows) == sum(len(run.poses_in_map1) for run in runs)
+    assert iterations == list(range(len(rows)))
+    first = runs[0]
+    reference = scan_hits_world(
+        first.poses_in_map1[0],
+        np.nan_to_num(first.ranges[0], nan=first.max_range),
+        first.beam_angles,
+        first.max_range,
+    )
+    np.testing.assert_allclose(rows[0], reference, atol=1e-4)
+    # Returns end on walls of the map the virtual robot scans (within a working cell).
+    working1 = result.trace.working1
+    near_wall = ndimage.binary_dilation(working1.occupied, iterations=1)
+    hits = np.concatenate([np.asarray(r, dtype=np.float64).reshape(-1, 2) for r in rows])
+    cells = working1.world_to_cell(hits)
+    inside = working1.contains(cells)
+    assert inside.all()
+    assert np.mean(near_wall[cells[:, 0], cells[:, 1]]) >= 0.99
+
+
+def test_particles_are_the_mcl_history_placed_by_the_answer(merged: Logged) -> None:
+    recording, result = merged.recording, merged.result
+    assert result.trace is not None and result.transform is not None
+    hypotheses = result.trace.hypotheses
+    rows = recording.column("/merge/mcl/particles", "Points2D:positions")
+    assert len(rows) == sum(len(r.history) for r in hypotheses.mcl_results) > 0
+    history = hypotheses.mcl_results[0].history
+    for t in (0, len(history) - 1):
+        expected = transform_points(result.transform, history[t][:, :2])
+        np.testing.assert_allclose(rows[t], expected, atol=1e-4)
+    # Iterations of the particles share the scans' timeline.
+    scan_iterations = set(recording.column("/merge/virtual_robot/scan", "merge_iteration"))
+    assert set(recording.column("/merge/mcl/particles", "merge_iteration")) <= scan_iterations
+
+
+def test_hypotheses_and_random_walk(merged: Logged) -> None:
+    recording, result = merged.recording, merged.result
+    assert result.trace is not None and result.transform is not None
+    origins = np.asarray(only(recording, "/merge/hypotheses", "Arrows2D:origins"))
+    labels = only(recording, "/merge/hypotheses", "Arrows2D:labels")
+    expected = np.array([h.map1_from_map2[:2] for h in result.hypotheses])
+    np.testing.assert_allclose(origins, expected, atol=1e-5)
+    assert len(labels) == len(result.hypotheses)
+    assert labels[0].startswith("#0 ai ")
+    # The best candidate's random walk: every proposal, after the virtual robot's stages.
+    walk = result.trace.refinements[0].trace
+    assert walk is not None
+    candidates = recording.column("/merge/refine/candidate", "Points2D:positions")
+    assert len(candidates) == len(walk.candidates)
+    # Each proposal is drawn where it puts map 2's origin.
+    np.testing.assert_allclose(np.concatenate(candidates), walk.candidates[:, :2], atol=1e-4)
+    first = min(recording.column("/merge/refine/candidate", "merge_iteration"))
+    assert first > max(recording.column("/merge/virtual_robot/scan", "merge_iteration"))
+    best_psi = np.array(
+        [v[0] for v in recording.column("/metrics/merge/refine_psi", "Scalars:scalars")]
+    )
+    assert len(best_psi) == len(walk.candidates)
+    assert np.all(np.diff(best_psi[np.isfinite(best_psi)]) <= 1e-9)  # never increases
+    (best,) = only(recording, "/merge/refine/best", "Arrows2D:origins")
+    np.testing.assert_allclose(best, result.transform[:2], atol=1e-5)
+
+
+def test_scalars_are_the_result(merged: Logged) -> None:
+    recording, result = merged.recording, merged.result
+    assert result.agreement is not None
+    (psi,) = only(recording, "/metrics/merge/psi", "Scalars:scalars")
+    (index,) = only(recording, "/metrics/merge/acceptance_index", "Scalars:scalars")
+    (seconds,) = only(recording, "/metrics/merge/seconds", "Scalars:scalars")
+    assert psi == pytest.approx(result.psi)
+    assert index == pytest.approx(result.agreement.index)
+    assert seconds == pytest.approx(result.seconds["total"])
+
+
+# -- a refusal -------------------------------------------------------------------------------
+
+
+def test_refusal_draws_map2_beside_map1_and_no_result(refused: Logged) -> None:
+    recording, m1, m2, result = refused.recording, refused.m1, refused.m2, refused.result
+    entities = set(recording.chunks)
+    assert {
+        "/merge/map1",
+        "/merge/map2",
+        "/merge/skeleton/map2",
+        "/merge/mcl/particles",
+    } <= entities
+    assert not {"/merge/result", "/merge/refine/best", "/metrics/merge/psi"} & entities
+    (translation,) = only(recording, "/merge/map2", "GridMap:translation")
+    (rotation,) = only(recording, "/merge/map2", "GridMap:rotation_axis_angle")
+    assert translation[0] > m1.extent[2]  # right of map 1, not overlapping it
+    assert translation[1] == pytest.approx(m1.origin[1])
+    assert rotation["angle"] == pytest.approx(0.0, abs=1e-9)
+    assert m2.cells.size > 0
+    texts = [t[0] for t in recording.column("/events", "TextLog:text")]
+    assert texts[0] == result.reason and texts[0].startswith("no confident merge")
+
+
+# -- mrslam merge --rrd ------------------------------------------------------------------------
+
+
+def test_cli_merge_writes_the_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    m1, m2 = map_pair("maze", (5.0, 5.0), (9.0, 7.0), TRUTH)
+    map1, map2 = save_map(tmp_path / "m1.yaml", m1), save_map(tmp_path / "m2.yaml", m2)
+    rrd = tmp_path / "merge.rrd"
+    status = main(
+        ["merge", str(map1), str(map2), "--rrd", str(rrd), "-o", str(tmp_path / "o.yaml")]
+    )
+    out, err = capsys.readouterr()
+    assert status == 0, err
+    recording = Recording(rrd)
+    assert set(recording.chunks) >= MERGE_ENTITIES
+    loaded = load_map(map1)
+    (translation,) = recording.column("/merge/map1", "GridMap:translation")[0]
+    np.testing.assert_allclose(translation, [*loaded.origin, 0.0], atol=1e-6)
+    fused = load_map(tmp_path / "o.yaml")
+    (translation,) = recording.column("/merge/result", "GridMap:translation")[0]
+    np.testing.assert_allclose(translation, [*fused.origin, 0.0], atol=1e-6)
+    assert grid_image(recording, "/merge/result").shape == fused.shape
+    assert "map1_from_map2" in out
