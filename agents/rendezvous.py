@@ -49,12 +49,9 @@ class RendezvousConfig:
     """After both robots arrived, wait this many steps for a sighting before rejecting."""
     timeout_steps: int = 900
     """Give up on a rendezvous (reject) after this many steps in all."""
-    standoff: float = 0.9
-    """Robot 1 aims this far (m) from the meeting point, so the two do not drive into
-    each other; the sensor sees up to 5 m, so they sight each other on the way."""
 
     def __post_init__(self) -> None:
-        for name in ("position_tolerance", "heading_tolerance", "standoff"):
+        for name in ("position_tolerance", "heading_tolerance"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"RendezvousConfig.{name} must be > 0, got {value!r}")

@@ -439,6 +439,37 @@ class Recorder:
         self._check_open()
         self._log_grid(entity, grid, parent_from_grid, draw_order, static=static, opacity=opacity)
 
+    # -- plans, frontiers, team ---------------------------------------------------------
+
+    def log_points(
+        self, entity: str, points: ArrayLike, robot: int | None = None, radius: float = 0.06
+    ) -> None:
+        """Log ``Points2D`` (N, 2) at ``entity`` (e.g. ``robot_0/frontiers``,
+        ``rendezvous/meeting_point``) in its root's frame; coloured as ``robot`` if given."""
+        self._check_open()
+        array = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        colour = robot_colour(robot) if robot is not None else (0, 170, 0)
+        self._stream.log(
+            entity.strip("/"),
+            rr.Points2D(array, radii=radius, colors=colour, draw_order=_DRAW_ORDER_POSE),
+        )
+
+    def log_line(self, entity: str, points: ArrayLike, robot: int | None = None) -> None:
+        """Log one line strip (N, 2) at ``entity`` (e.g. ``robot_0/plan``)."""
+        self._check_open()
+        array = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        colour = robot_colour(robot) if robot is not None else (0, 170, 0)
+        strips = [array] if len(array) >= 2 else []
+        self._stream.log(
+            entity.strip("/"),
+            rr.LineStrips2D(strips, radii=0.03, colors=colour, draw_order=_DRAW_ORDER_SCAN),
+        )
+
+    def log_text(self, entity: str, text: str) -> None:
+        """Log a one-line state (``TextLog``) at ``entity``, e.g. ``team/state``."""
+        self._check_open()
+        self._stream.log(entity.strip("/"), rr.TextLog(text))
+
     # -- map merging ---------------------------------------------------------------------
 
     def log_merge(self, result: MergeResult, m1: GridMap, m2: GridMap) -> None:

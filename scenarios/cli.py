@@ -5,6 +5,7 @@
 ``mrslam scenarios``           list worlds; ``--export NAME OUT.yaml`` writes a floor plan
 ``mrslam bench sim``           simulator speed, side by side with IR-SIM
 ``mrslam bench slam``          onboard SLAM accuracy (ATE, map agreement) and speed
+``mrslam bench explore``       time to 90 % coverage, coordinated against independent robots
 ``mrslam bench merge``         map merging: our pipeline against the random walk alone and
                                the ROS map_merge feature baseline, on simulated map pairs
 
@@ -38,13 +39,19 @@ def _build_parser() -> argparse.ArgumentParser:
     run.add_argument("--map", type=Path, help="build the world from a ROS map YAML instead")
     run.add_argument("--seed", type=int, default=0)
     run.add_argument(
-        "--max-steps", type=int, default=2000, help="env steps of 0.1 s (default 2000)"
+        "--max-steps", type=int, default=3000, help="env steps of 0.1 s (default 3000)"
     )
     run.add_argument(
         "--out", type=Path, default=Path("runs"), help="parent folder of the run folder"
     )
     run.add_argument("--name", help="run folder name (default <scenario>-seed<seed>)")
     run.add_argument("--no-record", action="store_true", help="do not write recording.rrd")
+    run.add_argument(
+        "--independent",
+        action="store_true",
+        help="the robots never interact (the no-coordination baseline)",
+    )
+    run.add_argument("--no-comm", action="store_true", help="the radio link never comes up")
     run.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
 
     merge = commands.add_parser(
@@ -83,6 +90,13 @@ def _build_parser() -> argparse.ArgumentParser:
     slam.add_argument("--steps", type=int, default=3000, help="env steps per run (default 3000)")
     slam.add_argument("--seed", type=int, default=0)
     slam.add_argument("--json", action="store_true")
+    explore = kinds.add_parser(
+        "explore", help="time to 90% coverage with coordination against independent robots"
+    )
+    explore.add_argument("--scenarios", nargs="*", help="scenario names (default: built-in five)")
+    explore.add_argument("--seeds", type=int, default=5, help="seeds 0..N-1 (default 5)")
+    explore.add_argument("--max-steps", type=int, default=4000, help="per run (default 4000)")
+    explore.add_argument("--json", action="store_true")
     merge = kinds.add_parser(
         "merge", help="map merging: success, wrong answers, refusals and time per method"
     )
@@ -116,17 +130,28 @@ def _cmd_run(args: argparse.Namespace) -> int:
         out=args.out,
         name=args.name,
         record=not args.no_record,
+        interaction=not args.independent,
+        comm=not args.no_comm,
         progress=not args.json,
     )
     report = run_experiment(config)
     if args.json:
         print(json.dumps(report, indent=2))
     else:
-        robots = ", ".join(
-            f"{agent} coverage {r['coverage']:.0%}" for agent, r in report["robots"].items()
+        merge = report["merge"]
+        if merge["verified"]:
+            merged = (
+                f"merge verified at step {merge['step_verified']} "
+                f"({merge['hypotheses_tested']} hypotheses tested), error "
+                f"{merge['translation_error']:.3f} m / {merge['rotation_error']:.2f}°"
+            )
+        else:
+            merged = f"no merge ({merge['hypotheses_tested']} hypotheses tested)"
+        coverage = report["coverage"]["merged"]
+        print(
+            f"{report['scenario']}: {report['steps']} steps ({report['sim_time']:.0f} s simulated) "
+            f"in {report['wall_time']:.1f} s; {merged}; coverage {coverage:.0%}"
         )
-        summary = f"{report['steps']} steps in {report['wall_time']:.1f} s"
-        print(f"{report['scenario']}: {summary}; {robots}")
         print(f"outputs in {report['outputs']['run_dir']}")
     return 0
 
@@ -195,6 +220,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         return _cmd_bench_slam(args)
     if args.bench == "merge":
         return _cmd_bench_merge(args)
+    if args.bench == "explore":
+        return _cmd_bench_explore(args)
     from mrslam_env.worlds import available_scenarios, build_world
     from scenarios.bench import bench_sim
 
@@ -232,6 +259,28 @@ def _cmd_bench_slam(args: argparse.Namespace) -> int:
     warm_up()  # compile/load the numba kernels before anything is timed
     rows = run_slam_benchmark(args.scenarios or DEFAULT_SCENARIOS, args.steps, args.seed)
     print(json.dumps(rows, indent=2) if args.json else format_slam_table(rows))
+    return 0
+
+
+def _cmd_bench_explore(args: argparse.Namespace) -> int:
+    from scenarios.bench_explore import (
+        DEFAULT_SCENARIOS,
+        format_explore_table,
+        run_explore_benchmark,
+    )
+
+    if args.seeds < 1 or args.max_steps < 1:
+        raise ValueError("--seeds and --max-steps must be >= 1")
+    rows, runs = run_explore_benchmark(
+        args.scenarios or DEFAULT_SCENARIOS,
+        range(args.seeds),
+        args.max_steps,
+        progress=None if args.json else lambda text: print(text, file=sys.stderr),
+    )
+    if args.json:
+        print(json.dumps({"summary": rows, "runs": runs}, indent=2))
+    else:
+        print(format_explore_table(rows))
     return 0
 
 

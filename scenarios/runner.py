@@ -1,14 +1,23 @@
-"""The experiment runner behind ``mrslam run``.
+"""The experiment runner behind ``mrslam run`` (DESIGN §6, §8).
 
-For now: robots wander with :class:`agents.wander.WanderPolicy`, each mapping with its
-onboard SLAM; the run is recorded and each robot's final map saved as a ROS map file. The
-full experiment (map merging, rendezvous, coordinated exploration) replaces the policy in
-later issues.
+Two robots start at poses neither knows of the other. Each maps with its onboard SLAM and
+explores its own frontiers; when they can talk, the team coordinator
+(:class:`agents.team.TeamCoordinator`) merges their maps by virtual robot motion, sends
+them to a rendezvous to verify the best hypothesis with the peer sensor, refines the
+accepted one and lets them explore the merged map together. The run stops when the
+robots' maps together cover ``target_coverage`` of the free area (evaluated against the
+ground truth, which the robots never see) or after ``max_steps``.
+
+Outputs in ``<out>/<name>/``: ``recording.rrd``, ``report.json``, ``robot_0.yaml``/``.pgm``
+and ``robot_1.yaml``/``.pgm`` (each robot's map in its own frame), ``merged.yaml``/``.pgm``
+(in robot 0's frame, when merged) and ``figure.png`` (ground truth, m1, m2, merge with the
+preliminary estimate, merge after refinement).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -17,19 +26,25 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
-from agents.wander import WanderPolicy
-from mrslam_env.config import EnvConfig
-from mrslam_env.env import MultiRobotSlamEnv
-from mrslam_env.geometry import transform_points
+from agents.team import TeamConfig, TeamCoordinator, TeamState
+from mrslam_env.config import CommConfig, EnvConfig
+from mrslam_env.env import MultiRobotSlamEnv, observable_cells
+from mrslam_env.geometry import compose, inverse, transform_points, wrap_scalar
+from mrslam_env.gridmap import UNKNOWN, GridMap
 from mrslam_env.mapio import load_map, save_map
+from mrslam_env.merge.fuse import fuse_maps, resample_map
 from mrslam_env.recording import Recorder
 from mrslam_env.sim.mapworld import world_from_map
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
 from mrslam_env.slam.evaluation import map_agreement
 from mrslam_env.worlds import build_world
+from scenarios.figure import summary_figure
 
-__all__ = ["RunConfig", "resolve_world", "run_experiment"]
+__all__ = ["CoverageEvaluator", "RunConfig", "resolve_world", "run_experiment"]
+
+FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -41,7 +56,7 @@ class RunConfig:
     map_path: Path | None = None
     """A ROS map YAML to build the world from."""
     seed: int = 0
-    max_steps: int = 2000
+    max_steps: int = 3000
     """Env steps (0.1 s each by default)."""
     out: Path = Path("runs")
     """Parent folder of the run folder."""
@@ -49,18 +64,30 @@ class RunConfig:
     """Run folder name; defaults to ``<scenario>-seed<seed>``."""
     record: bool = True
     """Write ``recording.rrd``."""
+    figure: bool = True
+    """Write ``figure.png``."""
     scan_every: int = 5
     """Log lidar scans every this many steps (poses are logged every step)."""
     map_every: int = 10
-    """Log a robot's map (when it changed), path and ATE every this many steps."""
+    """Log a robot's map (when it changed), path, plan and frontiers every this many steps."""
+    interaction: bool = True
+    """False: the robots never interact (independent exploration, the baseline)."""
+    comm: bool = True
+    """False: the radio link never comes up."""
+    target_coverage: float = 0.95
+    """Stop once the robots' maps together cover this fraction of the free area."""
+    coverage_every: int = 20
+    """Steps between coverage evaluations."""
     progress: bool = True
 
     def __post_init__(self) -> None:
         if self.max_steps < 1:
             raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
-        for name in ("scan_every", "map_every"):
+        for name in ("scan_every", "map_every", "coverage_every"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if not 0 < self.target_coverage <= 1:
+            raise ValueError(f"target_coverage must be in (0, 1], got {self.target_coverage}")
 
 
 def resolve_world(scenario: str, map_path: Path | None, seed: int = 0) -> WorldSpec:
@@ -69,6 +96,55 @@ def resolve_world(scenario: str, map_path: Path | None, seed: int = 0) -> WorldS
         return build_world(scenario)
     grid = load_map(map_path)
     return world_from_map(grid, name=f"map:{Path(map_path).name}", rng=np.random.default_rng(seed))
+
+
+class CoverageEvaluator:
+    """How much of the free area maps cover, judged against the ground truth.
+
+    Evaluation only (privileged): the free cells of a ground-truth raster that the robots
+    could ever reach, as world points; a map covers a point when the cell under it is
+    known (FREE or OCCUPIED) once the map is put in the world by its true frame.
+    """
+
+    def __init__(self, world: WorldSpec, starts: FloatArray, resolution: float = 0.1) -> None:
+        raster = ground_truth_map(world, resolution, margin=1.0)
+        free = observable_cells(raster, starts) & raster.free
+        self.points = raster.cell_to_world(np.argwhere(free))
+
+    def known(self, grid: GridMap, world_from_map: FloatArray) -> NDArray[np.bool_]:
+        """Which evaluation points ``grid`` knows, (P,) bool."""
+        cells = grid.world_to_cell(transform_points(inverse(world_from_map), self.points))
+        inside = grid.contains(cells)
+        known = np.zeros(len(self.points), dtype=bool)
+        known[inside] = grid.cells[cells[inside, 0], cells[inside, 1]] != UNKNOWN
+        return known
+
+    def coverage(self, grids: list[GridMap], world_from_maps: list[FloatArray]) -> float:
+        """Fraction of the free area known in any of the maps."""
+        if len(self.points) == 0:
+            return 0.0
+        known = np.zeros(len(self.points), dtype=bool)
+        for grid, frame in zip(grids, world_from_maps, strict=True):
+            known |= self.known(grid, frame)
+        return float(known.mean())
+
+
+class _MapCache:
+    """Each robot's own map, rebuilt only when its SLAM integrated a new scan."""
+
+    def __init__(self, env: MultiRobotSlamEnv) -> None:
+        self.env = env
+        self.agents = list(env.possible_agents)
+        self._maps: dict[int, tuple[int, GridMap]] = {}
+
+    def __call__(self, robot: int) -> GridMap:
+        agent = self.agents[robot]
+        version = self.env.robot_slam(agent).n_integrated
+        cached = self._maps.get(robot)
+        if cached is None or cached[0] != version:
+            cached = (version, self.env.robot_map(agent))
+            self._maps[robot] = cached
+        return cached[1]
 
 
 @contextmanager
@@ -82,10 +158,18 @@ def _progress(total: int, enabled: bool) -> Iterator[Any]:
         bar.close()
 
 
-def _squared_error(world_from_map: np.ndarray, pose_in_map: np.ndarray, true_pose) -> float:
+def _squared_error(world_from_map: FloatArray, pose_in_map: FloatArray, true_pose: Any) -> float:
     """Squared position error (m²) of a SLAM pose against the truth."""
     estimate = transform_points(world_from_map, pose_in_map[None, :2])[0]
     return float(np.sum((estimate - np.asarray(true_pose)[:2]) ** 2))
+
+
+def _pose_dict(pose: FloatArray) -> dict[str, float]:
+    return {
+        "x": round(float(pose[0]), 4),
+        "y": round(float(pose[1]), 4),
+        "theta": round(float(pose[2]), 5),
+    }
 
 
 def run_experiment(config: RunConfig) -> dict[str, Any]:
@@ -94,125 +178,229 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
     name = config.name or f"{world.name.replace(':', '_')}-seed{config.seed}"
     run_dir = Path(config.out) / name
     run_dir.mkdir(parents=True, exist_ok=True)
-    env_config = EnvConfig(max_cycles=config.max_steps)
+    comm = CommConfig() if config.comm else CommConfig(comm_range=1e-9)
+    env_config = EnvConfig(max_cycles=config.max_steps, comm=comm)
     env = MultiRobotSlamEnv(scenario=world, seed=config.seed, config=env_config)
     observations, infos = env.reset()
     agents = list(env.possible_agents)
-    policies = {
-        agent: WanderPolicy(env_config.lidar.n_beams, np.random.default_rng([config.seed, i]))
-        for i, agent in enumerate(agents)
-    }
+    team = TeamCoordinator(
+        TeamConfig(interaction=config.interaction), rng=np.random.default_rng(config.seed)
+    )
+    maps = _MapCache(env)
+    # Robot i's map frame is its start pose: how its SLAM and the merge are judged.
+    world_from_maps = [env.simulator.starts[i].copy() for i in range(len(agents))]
+    true_transform = compose(inverse(world_from_maps[0]), world_from_maps[1])
+    evaluator = CoverageEvaluator(world, env.simulator.starts)
     recorder = (
         Recorder(run_dir / "recording.rrd", n_robots=len(agents), map_every=config.map_every)
         if config.record
         else None
     )
-    # The map frame of robot i is its start pose: that is how its SLAM is judged.
-    world_from_maps = env.simulator.starts.copy()
-    squared_errors = np.zeros(len(agents))
-    logged_scans = [-1] * len(agents)
-    started = time.perf_counter()
-    collisions = dict.fromkeys(agents, 0)
-    distance = dict.fromkeys(agents, 0.0)
-    comm_steps = 0
-    last_link: bool | None = None
-    last_seen = dict.fromkeys(agents, False)
-    steps = 0
     if recorder is not None:
         recorder.log_ground_truth(world, ground_truth_map(world, 0.05))
         recorder.log_event(
             f"run {name}: world {world.name}, {len(agents)} robots, seed {config.seed}"
         )
-    previous = {agent: infos[agent]["true_pose"] for agent in agents}
-    for i, agent in enumerate(agents):
-        squared_errors[i] += _squared_error(
-            world_from_maps[i], observations[agent]["pose"], infos[agent]["true_pose"]
-        )
+    squared_errors = np.array(
+        [
+            _squared_error(world_from_maps[i], observations[a]["pose"], infos[a]["true_pose"])
+            for i, a in enumerate(agents)
+        ]
+    )
+    logged_scans = [-1] * len(agents)
+    collisions = dict.fromkeys(agents, 0)
+    state = team.state
+    coverage_curve: list[tuple[int, float]] = []
+    t90: float | None = None
+    steps = 0
+    started = time.perf_counter()
     with _progress(config.max_steps, config.progress) as bar:
         while env.agents:
-            actions = {
-                agent: policies[agent].act(observations[agent]["scan"]) for agent in env.agents
-            }
-            observations, _rewards, _terms, _truncs, infos = env.step(actions)
+            actions = team.act([observations[a] for a in agents], maps)
+            observations, _rewards, _terms, _truncs, infos = env.step(
+                {agent: actions[i] for i, agent in enumerate(agents)}
+            )
             steps += 1
             bar.update(1)
-            link = bool(observations[agents[0]]["comm"].any()) if len(agents) > 1 else False
-            comm_steps += link
             for i, agent in enumerate(agents):
-                pose = infos[agent]["true_pose"]
-                distance[agent] += float(np.hypot(*(pose[:2] - previous[agent][:2])))
-                previous[agent] = pose
                 collisions[agent] += infos[agent]["collision"]
                 squared_errors[i] += _squared_error(
-                    world_from_maps[i], observations[agent]["pose"], pose
+                    world_from_maps[i], observations[agent]["pose"], infos[agent]["true_pose"]
                 )
-            if recorder is None:
-                continue
-            recorder.set_time(steps, steps * env_config.dt)
-            if link != last_link and len(agents) > 1:
-                recorder.log_event(f"comm link robot_0 <-> robot_1 {'up' if link else 'down'}")
-                last_link = link
-            for i, agent in enumerate(agents):
-                recorder.log_true_pose(i, infos[agent]["true_pose"])
-                if steps % config.scan_every == 0:
-                    recorder.log_scan(
-                        i,
-                        infos[agent]["true_pose"],
-                        observations[agent]["scan"],
-                        env.simulator.beam_angles,
-                        env_config.lidar.max_range,
-                    )
-                seen = bool(observations[agent]["peer"][:, 0].any())
-                if seen and not last_seen[agent]:
-                    recorder.log_event(f"{agent} detects another robot")
-                last_seen[agent] = seen
-                recorder.log_scalar(
-                    f"coverage/{agent}", infos[agent]["observed_area"] / env.observable_area
-                )
-                recorder.log_robot_pose(i, observations[agent]["pose"])
-                if recorder.map_due or not env.agents:
-                    slam = env.robot_slam(agent)
-                    recorder.log_robot_path(i, slam.trajectory)
-                    recorder.log_scalar(f"ate/{agent}", np.sqrt(squared_errors[i] / (steps + 1)))
-                    if slam.n_integrated != logged_scans[i]:
-                        recorder.log_grid(f"{agent}/map", env.robot_map(agent))
-                        logged_scans[i] = slam.n_integrated
+            if recorder is not None:
+                recorder.set_time(steps, steps * env_config.dt)
+                for decision in team.pop_decisions():
+                    recorder.log_event(decision.text)
+                if team.state is not state:
+                    recorder.log_text("team/state", str(team.state))
+                _record_step(recorder, env, team, maps, observations, infos, config, logged_scans)
+                if recorder.map_due:
+                    for i, agent in enumerate(agents):
+                        ate = float(np.sqrt(squared_errors[i] / (steps + 1)))
+                        recorder.log_scalar(f"ate/{agent}", ate)
+            else:
+                team.pop_decisions()
+            state = team.state
+            if steps % config.coverage_every == 0 or not env.agents:
+                covered = evaluator.coverage([maps(0), maps(1)], world_from_maps)
+                coverage_curve.append((steps, covered))
+                if recorder is not None:
+                    recorder.log_scalar("coverage/team", covered)
+                if t90 is None and covered >= 0.9:
+                    t90 = steps * env_config.dt
+                if covered >= config.target_coverage:
+                    break
+                if all(e.done for e in team.explorers):
+                    break
     wall_time = time.perf_counter() - started
-    maps = {agent: run_dir / f"{agent}.yaml" for agent in agents}
-    for agent, path in maps.items():
-        save_map(path, env.robot_map(agent))
-    truth = ground_truth_map(world, env.robot_map(agents[0]).resolution)
+
+    own_maps = [maps(i) for i in range(len(agents))]
+    for agent, grid in zip(agents, own_maps, strict=True):
+        save_map(run_dir / f"{agent}.yaml", grid)
+    outputs: dict[str, Any] = {
+        "run_dir": str(run_dir),
+        "maps": {agent: str(run_dir / f"{agent}.yaml") for agent in agents},
+    }
+    truth = ground_truth_map(world, own_maps[0].resolution)
+    merged = preliminary = None
+    merge_report: dict[str, Any] = {
+        "verified": team.transform is not None,
+        "transform": None,
+        "true_transform": _pose_dict(true_transform),
+        "translation_error": None,
+        "rotation_error": None,
+        "hypotheses_tested": team.hypotheses_tested,
+        "step_verified": team.step_verified,
+    }
+    if team.transform is not None:
+        other = own_maps[1]
+        if not math.isclose(other.resolution, own_maps[0].resolution):
+            other = resample_map(other, own_maps[0].resolution)
+        merged = fuse_maps(own_maps[0], other, team.transform)
+        assert team.preliminary_transform is not None
+        preliminary = fuse_maps(own_maps[0], other, team.preliminary_transform)
+        error = compose(inverse(true_transform), team.transform)
+        merge_report.update(
+            transform=_pose_dict(team.transform),
+            preliminary_transform=_pose_dict(team.preliminary_transform),
+            translation_error=round(float(np.hypot(error[0], error[1])), 4),
+            rotation_error=round(math.degrees(abs(wrap_scalar(float(error[2])))), 4),
+        )
+        save_map(run_dir / "merged.yaml", merged)
+        outputs["merged_map"] = str(run_dir / "merged.yaml")
+    coverage = {
+        "merged": round(
+            evaluator.coverage([merged], [world_from_maps[0]])
+            if merged is not None
+            else evaluator.coverage(own_maps, world_from_maps),
+            4,
+        ),
+        **{
+            agent: round(evaluator.coverage([own_maps[i]], [world_from_maps[i]]), 4)
+            for i, agent in enumerate(agents)
+        },
+    }
+    if config.figure:
+        outputs["figure"] = str(
+            summary_figure(
+                run_dir / "figure.png", truth, own_maps[0], own_maps[1], preliminary, merged
+            )
+        )
     report: dict[str, Any] = {
         "scenario": world.name,
         "seed": config.seed,
         "steps": steps,
         "sim_time": round(steps * env_config.dt, 6),
         "wall_time": round(wall_time, 3),
-        "observable_area": round(env.observable_area, 3),
-        "comm_up_fraction": round(comm_steps / max(steps, 1), 4),
-        "robots": {
-            agent: {
-                "observed_area": round(infos[agent]["observed_area"], 3),
-                "coverage": round(infos[agent]["observed_area"] / env.observable_area, 4),
-                "collision_steps": int(collisions[agent]),
-                "distance": round(distance[agent], 3),
-            }
-            for agent in agents
-        },
+        "interaction": config.interaction,
+        "comm": config.comm,
+        "merge": merge_report,
+        "coverage": coverage,
+        "t90": None if t90 is None else round(t90, 3),
+        "coverage_curve": [[s, round(c, 4)] for s, c in coverage_curve],
         "slam": {
             agent: {
                 "ate": round(float(np.sqrt(squared_errors[i] / (steps + 1))), 4),
-                "map_agreement": round(
-                    map_agreement(env.robot_map(agent), world_from_maps[i], truth), 4
-                ),
+                "map_agreement": round(map_agreement(own_maps[i], world_from_maps[i], truth), 4),
             }
             for i, agent in enumerate(agents)
         },
-        "outputs": {"run_dir": str(run_dir), "maps": {a: str(p) for a, p in maps.items()}},
+        "merged_map_accuracy": None
+        if merged is None
+        else round(map_agreement(merged, world_from_maps[0], truth), 4),
+        "collision_steps": {agent: int(collisions[agent]) for agent in agents},
+        "team_state": str(team.state),
+        "outputs": outputs,
     }
     if recorder is not None:
-        recorder.log_event(f"run finished after {steps} steps")
+        if merged is not None:
+            recorder.log_grid("team/merged_map", merged)
+        recorder.log_event(f"run finished after {steps} steps, coverage {coverage['merged']:.1%}")
         recorder.close()
-        report["outputs"]["recording"] = str(run_dir / "recording.rrd")
+        outputs["recording"] = str(run_dir / "recording.rrd")
     (run_dir / "report.json").write_text(json.dumps(report, indent=2) + "\n")
     return report
+
+
+def _record_step(
+    recorder: Recorder,
+    env: MultiRobotSlamEnv,
+    team: TeamCoordinator,
+    maps: _MapCache,
+    observations: dict[str, Any],
+    infos: dict[str, Any],
+    config: RunConfig,
+    logged_scans: list[int],
+) -> None:
+    """What one step adds to the recording (DESIGN §7)."""
+    agents = list(env.possible_agents)
+    lidar = env.config.lidar
+    due = recorder.map_due or not env.agents
+    coordinated = team.state is TeamState.COORDINATED_EXPLORATION and team.transform is not None
+    for i, agent in enumerate(agents):
+        recorder.log_true_pose(i, infos[agent]["true_pose"])
+        recorder.log_robot_pose(i, observations[agent]["pose"])
+        if recorder.step % config.scan_every == 0:
+            recorder.log_scan(
+                i,
+                infos[agent]["true_pose"],
+                observations[agent]["scan"],
+                env.simulator.beam_angles,
+                lidar.max_range,
+            )
+        if not due:
+            continue
+        slam = env.robot_slam(agent)
+        recorder.log_robot_path(i, slam.trajectory)
+        if slam.n_integrated != logged_scans[i]:
+            recorder.log_grid(f"{agent}/map", maps(i))
+            logged_scans[i] = slam.n_integrated
+        # Plans and frontiers are in the frame of the map explored: robot 0's while
+        # coordinating; bring them into the robot's own frame.
+        explorer = team.explorers[i]
+        own_from_plan = (
+            inverse(team.transform)
+            if coordinated and i == 1 and team.transform is not None
+            else None
+        )
+        for entity, points in (("plan", explorer.plan), ("frontiers", explorer.frontiers)):
+            if own_from_plan is not None and len(points):
+                points = transform_points(own_from_plan, points)
+            if entity == "plan":
+                recorder.log_line(f"{agent}/plan", points, robot=i)
+            else:
+                recorder.log_points(f"{agent}/frontiers", points, robot=i)
+    if due:
+        point = team.rendezvous_point
+        recorder.log_points(
+            "rendezvous/meeting_point", np.empty((0, 2)) if point is None else point
+        )
+        if team.rendezvous is not None:
+            recorder.log_text("rendezvous/status", f"verifying hypothesis #{team.rendezvous.index}")
+            for i in range(2):
+                plan = team.explorers[i].plan
+                if i == 1 and len(plan):
+                    plan = transform_points(team.rendezvous.hypothesis, plan)
+                recorder.log_line(f"rendezvous/plan_{i}", plan, robot=i)
+        if coordinated and team.merged_map is not None:
+            recorder.log_grid("team/merged_map", team.merged_map)

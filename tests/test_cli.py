@@ -69,9 +69,21 @@ def test_run_writes_report_and_recording(capsys, tmp_path) -> None:
     assert report == json.loads((tmp_path / "t" / "report.json").read_text())
     assert report["scenario"] == "office" and report["steps"] == 60
     assert report["sim_time"] == pytest.approx(6.0)
+    assert set(report["merge"]) >= {
+        "verified",
+        "transform",
+        "true_transform",
+        "translation_error",
+        "rotation_error",
+        "hypotheses_tested",
+        "step_verified",
+    }
+    assert report["merge"]["verified"] is False and report["merged_map_accuracy"] is None
+    assert set(report["coverage"]) == {"merged", "robot_0", "robot_1"}
+    assert report["t90"] is None  # 6 s is not enough
     for robot in ("robot_0", "robot_1"):
-        assert 0.0 < report["robots"][robot]["coverage"] <= 1.0
-        assert report["robots"][robot]["distance"] > 1.0  # the wanderer moves
+        assert 0.0 < report["coverage"][robot] <= report["coverage"]["merged"] <= 1.0
+    assert (tmp_path / "t" / "figure.png").stat().st_size > 1000
     recording = Recording(tmp_path / "t" / "recording.rrd")
     expected = ("/world/ground_truth", "/world/robot_0/true_pose", "/world/robot_1/scan", "/events")
     assert set(expected) <= set(recording.chunks)
@@ -81,7 +93,7 @@ def test_run_writes_report_and_recording(capsys, tmp_path) -> None:
         # Each robot's map is saved, and recorded with its pose and path in its own frame.
         saved = load_map(tmp_path / "t" / f"{robot}.yaml")
         assert report["outputs"]["maps"][robot] == str(tmp_path / "t" / f"{robot}.yaml")
-        for entity in ("map", "pose", "path"):
+        for entity in ("map", "pose", "path", "plan", "frontiers"):
             assert f"/{robot}/{entity}" in recording.chunks
         assert f"/metrics/ate/{robot}" in recording.chunks
         (origin,) = recording.at_step(f"/{robot}/pose", "Arrows2D:origins", 60)
@@ -89,6 +101,55 @@ def test_run_writes_report_and_recording(capsys, tmp_path) -> None:
         assert saved.free[cell[0], cell[1]], "the final pose stands on free space of the map"
         (translation,) = recording.at_step(f"/{robot}/map", "GridMap:translation", 60)
         np.testing.assert_allclose(np.ravel(translation)[:2], saved.origin, atol=1e-6)
+
+
+def test_the_default_experiment_verifies_a_merge_and_records_the_team(capsys, tmp_path) -> None:
+    # The default run (office, seed 0), cut short just after its merge is verified.
+    status, out, _ = run_cli(
+        capsys, "run", "--max-steps", "1100", "--out", str(tmp_path), "--name", "t", "--json"
+    )
+    assert status == 0
+    report = json.loads(out)
+    merge = report["merge"]
+    assert merge["verified"] and merge["step_verified"] <= 1100
+    assert merge["translation_error"] <= 0.10 and merge["rotation_error"] <= 1.0
+    assert merge["hypotheses_tested"] >= 1
+    assert report["coverage"]["merged"] > max(report["coverage"]["robot_0"], 0.5)
+    assert report["merged_map_accuracy"] >= 0.97
+    merged = load_map(tmp_path / "t" / "merged.yaml")
+    assert merged.free.sum() > load_map(tmp_path / "t" / "robot_0.yaml").free.sum()
+    recording = Recording(tmp_path / "t" / "recording.rrd")
+    for entity in (
+        "/team/state",
+        "/team/merged_map",
+        "/rendezvous/meeting_point",
+        "/rendezvous/status",
+        "/rendezvous/plan_0",
+        "/rendezvous/plan_1",
+    ):
+        assert entity in recording.chunks, entity
+    events = " ".join(str(text) for text in recording.column("/events", "TextLog:text"))
+    assert "rendezvous for hypothesis" in events and "accepted" in events
+
+
+def test_run_without_comm_explores_independently(capsys, tmp_path) -> None:
+    status, out, _ = run_cli(
+        capsys,
+        "run",
+        "--no-comm",
+        "--max-steps",
+        "300",
+        "--out",
+        str(tmp_path),
+        "--no-record",
+        "--json",
+    )
+    assert status == 0
+    report = json.loads(out)
+    assert report["comm"] is False
+    assert report["merge"]["verified"] is False and report["merge"]["transform"] is None
+    assert report["merge"]["hypotheses_tested"] == 0
+    assert report["coverage"]["robot_0"] > 0.1 and report["coverage"]["robot_1"] > 0.1
 
 
 def test_run_from_a_map_file(capsys, tmp_path) -> None:

@@ -48,6 +48,8 @@ __all__ = [
     "MergeTrace",
     "ScoredHypothesis",
     "merge_maps",
+    "refine_transform",
+    "relative_transform_error",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -614,6 +616,42 @@ def merge_maps(
         seconds=seconds,
         trace=merge_trace,
     )
+
+
+def refine_transform(
+    m1: GridMap,
+    m2: GridMap,
+    map1_from_map2: FloatArray,
+    config: MergeConfig | None = None,
+    *,
+    rng: np.random.Generator,
+) -> tuple[FloatArray, float, Agreement]:
+    """Refine a known-good ``map1_from_map2`` on the current maps (DESIGN §5 step 6):
+    the random walk at the working resolution, then at the finer input resolution.
+
+    For a transform verified some other way (a rendezvous); no acceptance decision is
+    made. Returns the transform, its psi (cells) and the agreement at the fine
+    resolution.
+    """
+    config = config if config is not None else MergeConfig()
+    resolution = _working_resolution(m1, m2, config)
+    w1, w2 = _at_resolution(m1, resolution), _at_resolution(m2, resolution)
+    walk = refine_random_walk(w1, w2, map1_from_map2, config=config.random_walk, rng=rng)
+    fine = min(m1.resolution, m2.resolution)
+    f1, f2 = _at_resolution(m1, fine), _at_resolution(m2, fine)
+    d1, d2 = distance_maps(f1), distance_maps(f2)
+    final = refine_random_walk(
+        f1,
+        f2,
+        walk.transform,
+        config=config.final_random_walk,
+        rng=rng,
+        distances1=d1,
+        distances2=d2,
+    )
+    transform = np.asarray(final.transform, dtype=np.float64)
+    agreement = acceptance_index(f1, f2, transform, distances1=d1, distances2=d2)
+    return transform, float(final.psi), agreement
 
 
 def relative_transform_error(

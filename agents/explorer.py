@@ -1,0 +1,644 @@
+"""Frontier exploration for one robot, and the frontier split for a team (DESIGN §6).
+
+:class:`ExplorerPolicy` is the thin stateful shell around the pure steps in
+:mod:`agents.frontiers`, :mod:`agents.planning` and :mod:`agents.follower`:
+
+* on a **replan** (no plan yet, goal reached, path blocked by a newly mapped wall, target
+  no longer a frontier, stuck, or every ``replan_interval`` steps) it inflates the map,
+  runs one Dijkstra search from the robot, extracts the frontiers reachable from it, picks
+  the one of highest utility ``gain - cost_weight * path_cost`` (:func:`frontier_utility`)
+  and plans the path there;
+* on every other step it only follows the path and runs two cheap checks (is the path
+  ahead still clear, is the target still a frontier).
+
+A *given goal* (:meth:`ExplorerPolicy.set_goal`) replaces frontier choice: the team
+coordinator uses it to send a robot to a rendezvous point or to an assigned frontier.
+
+:func:`assign_frontiers` and :func:`team_frontier_goals` split frontiers between robots that
+share a map frame (coordinated exploration, the paper's fourth kind of interaction):
+greedy, each robot in turn takes the best remaining frontier, and the gains of frontiers
+near a taken one are discounted so that two robots do not explore the same place.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from agents.follower import FollowerConfig, PathFollower, lane_clearance
+from agents.frontiers import FrontierConfig, Frontiers, extract_frontiers
+from agents.planning import (
+    CostGrid,
+    DistanceField,
+    PlannerConfig,
+    distance_field,
+    inflate,
+    shorten_path,
+)
+from mrslam_env.geometry import world_to_cell
+from mrslam_env.gridmap import GridMap
+
+__all__ = [
+    "ExplorerConfig",
+    "ExplorerPolicy",
+    "ExplorerStatus",
+    "assign_frontiers",
+    "frontier_utility",
+    "team_frontier_goals",
+]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+ExplorerStatus = Literal[
+    "idle", "exploring", "to_goal", "arrived", "goal_unreachable", "blocked", "done"
+]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ExplorerConfig:
+    """Tuning of :class:`ExplorerPolicy`."""
+
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    frontiers: FrontierConfig = field(default_factory=FrontierConfig)
+    follower: FollowerConfig = field(default_factory=FollowerConfig)
+    cost_weight: float = 1.0
+    """Information gain (m²) one metre of path cost is worth, m²/m (>= 0)."""
+    min_gain: float = 0.5
+    """Frontiers whose information gain is below this are not worth a trip, m² (>= 0)."""
+    target_bonus: float = 8.0
+    """Utility bonus (m²) of the frontier being driven to (the one that overlaps the
+    current target's cells), so that the choice does not flip between two similar
+    frontiers on every replan (>= 0)."""
+    separation: float = 4.0
+    """Frontiers closer than this to a teammate's target have their gain scaled by
+    ``distance / separation``, m (> 0)."""
+    replan_interval: int = 25
+    """Steps between routine replans."""
+    min_replan_interval: int = 5
+    """Steps after a replan before an explored target triggers the next one (the robot
+    keeps driving meanwhile; blocked paths and stuck robots replan at once)."""
+    blocked_lookahead: float = 2.5
+    """How far ahead along the path (m) each step checks for newly mapped walls."""
+    blacklist_radius: float = 0.6
+    """Frontier goals within this distance of a failed or fruitless goal are skipped, m."""
+    blacklist_steps: int = 400
+    """How long a goal stays blacklisted, steps."""
+    target_gone_fraction: float = 0.25
+    """The target counts as explored when fewer than this fraction of its frontier cells
+    are still frontier cells."""
+    done_after: int = 3
+    """Consecutive replans without a worthwhile frontier before reporting ``done``."""
+    goal_snap: float = 1.0
+    """A given goal in a blocked or unknown cell is moved to the nearest reachable cell
+    within this distance, m."""
+    start_snap: float = 0.6
+    """A robot inside a wall's inflation plans from the nearest passable cell within this
+    distance, m."""
+    tie_jitter: float = 1e-3
+    """Scale of the random tie-breaking noise added to utilities, m²."""
+
+    def __post_init__(self) -> None:
+        non_negative = ("cost_weight", "min_gain", "target_bonus", "tie_jitter")
+        for name in non_negative:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"ExplorerConfig.{name} must be >= 0, got {value!r}")
+        positive = ("separation", "blocked_lookahead", "blacklist_radius", "goal_snap")
+        for name in (*positive, "start_snap"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"ExplorerConfig.{name} must be > 0 m, got {value!r}")
+        for name in ("replan_interval", "min_replan_interval", "blacklist_steps", "done_after"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"ExplorerConfig.{name} must be an int >= 1, got {value!r}")
+        if not 0 <= self.target_gone_fraction <= 1:
+            raise ValueError(
+                "ExplorerConfig.target_gone_fraction must be in [0, 1], "
+                f"got {self.target_gone_fraction!r}"
+            )
+
+
+def frontier_utility(
+    gains: ArrayLike,
+    path_costs: ArrayLike,
+    cost_weight: float,
+    *,
+    min_gain: float = 0.0,
+) -> FloatArray:
+    """Utility of visiting each frontier: information gain minus weighted path cost.
+
+    Parameters
+    ----------
+    gains : array_like, shape (..., F)
+        m².
+    path_costs : array_like, shape (..., F)
+        Path cost from the robot to each goal, m; ``inf`` = unreachable.
+    cost_weight : float
+        m² per m.
+    min_gain : float
+        Frontiers with a smaller gain get ``-inf``, m².
+
+    Returns
+    -------
+    ndarray of float64, shape (..., F)
+        m²; ``-inf`` for unreachable or worthless frontiers.
+    """
+    gains = np.asarray(gains, dtype=np.float64)
+    path_costs = np.asarray(path_costs, dtype=np.float64)
+    utility = gains - cost_weight * np.where(np.isfinite(path_costs), path_costs, 0.0)
+    return np.where(np.isfinite(path_costs) & (gains >= min_gain), utility, -np.inf)
+
+
+def _separation_discount(goals: FloatArray, taken: ArrayLike, separation: float) -> FloatArray:
+    """Per goal, the factor ``min(1, d / separation)`` for its distance d to ``taken``."""
+    taken = np.asarray(taken, dtype=np.float64).reshape(-1, 2)
+    if len(taken) == 0 or len(goals) == 0:
+        return np.ones(len(goals))
+    distance = np.hypot(*(goals[:, None, :] - taken[None, :, :]).transpose(2, 0, 1)).min(axis=1)
+    return np.minimum(distance / separation, 1.0)
+
+
+def assign_frontiers(
+    goals: ArrayLike,
+    gains: ArrayLike,
+    path_costs: ArrayLike,
+    *,
+    cost_weight: float = 2.0,
+    separation: float = 4.0,
+    min_gain: float = 0.0,
+) -> IntArray:
+    """Split frontiers between robots greedily, keeping the robots apart.
+
+    Repeatedly take the (robot, frontier) pair of highest utility
+    (:func:`frontier_utility`) among the robots still without a frontier; then scale the
+    gain of every frontier by ``min(1, d / separation)``, d its distance to the taken
+    goal, so the next robot prefers places the first will not see. A robot may share a
+    frontier only when nothing else is worth its while.
+
+    Parameters
+    ----------
+    goals : array_like, shape (F, 2)
+        Frontier goals in the robots' common frame, m.
+    gains : array_like, shape (F,)
+        Information gains, m².
+    path_costs : array_like, shape (R, F)
+        Path cost from each robot to each goal, m; ``inf`` = unreachable.
+    cost_weight : float
+        m² per m.
+    separation : float
+        m (> 0).
+    min_gain : float
+        m².
+
+    Returns
+    -------
+    ndarray of int64, shape (R,)
+        Frontier index per robot, ``-1`` for a robot with no reachable worthwhile frontier.
+    """
+    goals = np.asarray(goals, dtype=np.float64).reshape(-1, 2)
+    gains_left = np.asarray(gains, dtype=np.float64).reshape(-1).copy()
+    costs = np.asarray(path_costs, dtype=np.float64)
+    if costs.ndim != 2 or costs.shape[1] != len(goals) or len(gains_left) != len(goals):
+        raise ValueError(
+            f"path_costs must have shape (robots, {len(goals)}) to match goals {goals.shape} "
+            f"and gains {gains_left.shape}, got {costs.shape}"
+        )
+    if not separation > 0:
+        raise ValueError(f"separation must be > 0 m, got {separation!r}")
+    robots = costs.shape[0]
+    assignment = np.full(robots, -1, dtype=np.int64)
+    worthwhile = gains_left >= min_gain
+    for _ in range(robots):
+        utility = frontier_utility(gains_left, costs, cost_weight)
+        utility[:, ~worthwhile] = -np.inf
+        utility[assignment >= 0] = -np.inf
+        if not np.isfinite(utility).any():
+            break
+        robot, frontier = np.unravel_index(int(np.argmax(utility)), utility.shape)
+        assignment[robot] = frontier
+        gains_left *= _separation_discount(goals, goals[frontier], separation)
+    return assignment
+
+
+def team_frontier_goals(
+    grid: GridMap,
+    positions: ArrayLike,
+    config: ExplorerConfig | None = None,
+) -> tuple[FloatArray, Frontiers]:
+    """Frontier goals for several robots on one shared map (coordinated exploration).
+
+    Parameters
+    ----------
+    grid : GridMap
+        The merged map, in the frame of ``positions``.
+    positions : array_like, shape (R, 2) or (R, 3)
+        The robots' poses in that frame, m.
+    config : ExplorerConfig, optional
+        Planner, frontier and utility settings.
+
+    Returns
+    -------
+    goals : ndarray of float64, shape (R, 2)
+        Goal per robot (give it to :meth:`ExplorerPolicy.set_goal`); NaN rows for robots
+        with nothing worth exploring or no passable start.
+    frontiers : Frontiers
+        The frontiers reachable by at least one robot.
+    """
+    config = config if config is not None else ExplorerConfig()
+    robots = np.asarray(positions, dtype=np.float64)
+    robots = robots.reshape(len(robots), -1)
+    cost_grid = inflate(grid, config.planner)
+    fields: list[DistanceField | None] = []
+    for position in robots:
+        try:
+            fields.append(distance_field(cost_grid, position[:2], snap_distance=config.start_snap))
+        except ValueError:
+            fields.append(None)
+    reachable = np.zeros(grid.shape, dtype=bool)
+    for distances in fields:
+        if distances is not None:
+            reachable |= distances.reachable
+    frontiers = extract_frontiers(grid, config.frontiers, reachable=reachable)
+    rows, cols = frontiers.goal_cells.T
+    path_costs = np.array(
+        [
+            distances.cost[rows, cols] if distances is not None else np.full(len(frontiers), np.inf)
+            for distances in fields
+        ]
+    ).reshape(len(robots), len(frontiers))
+    assignment = assign_frontiers(
+        frontiers.goals,
+        frontiers.gains,
+        path_costs,
+        cost_weight=config.cost_weight,
+        separation=config.separation,
+        min_gain=config.min_gain,
+    )
+    goals = np.full((len(robots), 2), np.nan)
+    assigned = assignment >= 0
+    goals[assigned] = frontiers.goals[assignment[assigned]]
+    return goals, frontiers
+
+
+def _disk_offsets(radius_cells: float) -> IntArray:
+    reach = math.ceil(radius_cells)
+    rows, cols = np.mgrid[-reach : reach + 1, -reach : reach + 1]
+    inside = rows**2 + cols**2 <= radius_cells**2
+    return np.stack([rows[inside], cols[inside]], axis=1).astype(np.int64)
+
+
+class ExplorerPolicy:
+    """Frontier exploration for one robot: ``act(observation, robot_map) -> (v, omega)``.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Breaks ties between frontiers of equal utility.
+    config : ExplorerConfig, optional
+
+    Attributes
+    ----------
+    status : str
+        ``"exploring"`` (driving to a frontier), ``"to_goal"`` / ``"arrived"`` /
+        ``"goal_unreachable"`` (a given goal), ``"blocked"`` (no passable cell near the
+        robot), ``"done"`` (no frontier worth visiting is left), ``"idle"`` (before the
+        first step).
+    replans : int
+        Number of replans so far; ``last_replan_reason`` says why the last one happened.
+    """
+
+    def __init__(self, rng: np.random.Generator, config: ExplorerConfig | None = None) -> None:
+        self.config = config if config is not None else ExplorerConfig()
+        self.rng = rng
+        self.follower = PathFollower(self.config.follower)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget plans, goals, frontiers and blacklists (a new episode)."""
+        self.follower.clear()
+        self.status: ExplorerStatus = "idle"
+        self.replans = 0
+        self.last_replan_reason = ""
+        self._step = 0
+        self._last_replan_step = -(10**9)
+        self._given_goal: FloatArray | None = None
+        self._target: FloatArray | None = None
+        self._target_cells = np.empty((0, 2))
+        self._frontiers = np.empty((0, 2))
+        self._frontier_set: Frontiers | None = None
+        self._blacklist: list[tuple[float, float, int]] = []
+        self._teammate_targets = np.empty((0, 2))
+        self._empty_replans = 0
+        self._stuck_seen = 0
+        self._angles: FloatArray | None = None
+        self._grid_origin: tuple[float, float] = (0.0, 0.0)
+        self._grid_resolution = 1.0
+
+    # --- what the coordinator and the recorder read and set -------------------------------
+
+    @property
+    def plan(self) -> FloatArray:
+        """The path being followed, (P, 2) map-frame m (empty when none)."""
+        return self.follower.path
+
+    @property
+    def frontiers(self) -> FloatArray:
+        """Centroids of the frontiers found at the last replan, (F, 2) map-frame m."""
+        return self._frontiers.copy()
+
+    @property
+    def frontier_set(self) -> Frontiers | None:
+        """All of the last replan's frontier data (goals, gains, sizes), or None."""
+        return self._frontier_set
+
+    @property
+    def target(self) -> FloatArray | None:
+        """The current goal (frontier goal or given goal), (2,) map-frame m, or None."""
+        return None if self._target is None else self._target.copy()
+
+    @property
+    def done(self) -> bool:
+        """True when no frontier worth visiting is left (exploration finished)."""
+        return self.status == "done"
+
+    def set_goal(self, point: ArrayLike) -> None:
+        """Drive to ``point`` (2,) in the map frame instead of exploring; replans now."""
+        goal = np.asarray(point, dtype=np.float64).reshape(-1)[:2]
+        if goal.shape != (2,) or not np.all(np.isfinite(goal)):
+            raise ValueError(f"set_goal needs a finite (x, y), got {point!r}")
+        self._given_goal = goal.copy()
+        self._target = goal.copy()
+        self._target_cells = np.empty((0, 2))
+        self.follower.clear()
+        self.status = "to_goal"
+        self._last_replan_step = -(10**9)
+
+    def clear_goal(self) -> None:
+        """Go back to exploring frontiers; replans on the next step."""
+        self._given_goal = None
+        self._target = None
+        self.follower.clear()
+        self.status = "exploring"
+        self._empty_replans = 0
+        self._last_replan_step = -(10**9)
+
+    def set_teammate_targets(self, points: ArrayLike) -> None:
+        """Teammates' targets (K, 2) in this robot's map frame: frontiers near them are
+        discounted (``separation``). An empty array clears them."""
+        targets = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        self._teammate_targets = targets[np.all(np.isfinite(targets), axis=1)]
+
+    # --- the policy ------------------------------------------------------------------------
+
+    def act(
+        self,
+        observation: dict[str, Any],
+        robot_map: GridMap,
+        *,
+        pose_in_map: ArrayLike | None = None,
+    ) -> NDArray[np.float32]:
+        """One normalised action ``(v, omega)`` in [-1, 1], float32 (2,).
+
+        Parameters
+        ----------
+        observation : dict
+            The env observation of this robot; uses ``pose`` (unless ``pose_in_map`` is
+            given) and ``scan`` (a guard against obstacles the map misses).
+        robot_map : GridMap
+            The map to explore (the robot's own, or a merged one), in the frame of the
+            pose.
+        pose_in_map : array_like, shape (3,), optional
+            The robot's pose in ``robot_map``'s frame, when that is not its own map frame.
+        """
+        self._step += 1
+        pose = np.asarray(
+            observation["pose"] if pose_in_map is None else pose_in_map, dtype=np.float64
+        )[:3]
+        reason = self._replan_reason(robot_map, pose)
+        if reason:
+            self._replan(robot_map, pose, reason)
+        if self.status in ("done", "blocked", "goal_unreachable", "idle"):
+            self.follower.clear()
+        clearance = self._clearance(observation.get("scan"))
+        action = self.follower.step(pose, clearance=clearance)
+        if self._given_goal is not None and self.follower.status == "reached":
+            self.status = "arrived"
+        return action
+
+    def _clearance(self, scan: Any) -> tuple[float, float] | None:
+        if scan is None:
+            return None
+        ranges = np.asarray(scan, dtype=np.float64)
+        if self._angles is None or len(self._angles) != len(ranges):
+            self._angles = np.asarray(
+                -np.pi + np.arange(len(ranges)) * (2.0 * np.pi / len(ranges)), dtype=np.float64
+            )
+        return lane_clearance(ranges, self._angles, self.config.planner.robot_radius)
+
+    # --- when to replan --------------------------------------------------------------------
+
+    def _replan_reason(self, grid: GridMap, pose: FloatArray) -> str:
+        config = self.config
+        since = self._step - self._last_replan_step
+        if self.follower.stuck_events != self._stuck_seen:
+            self._stuck_seen = self.follower.stuck_events
+            if self._target is not None and self._given_goal is None:
+                self._blacklist_point(self._target)
+            return "stuck"
+        if self.follower.status == "recovering":
+            return ""
+        if self.status in ("done", "blocked", "goal_unreachable"):
+            return "retry" if since >= config.replan_interval else ""
+        if self._given_goal is not None:
+            if self.status == "arrived":
+                return ""
+            if len(self.follower.path) == 0:
+                return "no_plan"
+        else:
+            if len(self.follower.path) == 0:
+                return "no_plan"
+            if self.follower.status == "reached":
+                if self._target is not None:
+                    self._blacklist_point(self._target)
+                return "goal_reached"
+            if since >= config.min_replan_interval and self._target_explored(grid):
+                return "target_explored"
+        if self._path_blocked(grid):
+            return "path_blocked"
+        if since >= config.replan_interval:
+            return "periodic"
+        return ""
+
+    def _path_blocked(self, grid: GridMap) -> bool:
+        """Whether an OCCUPIED cell now lies within the blocked radius of the path ahead."""
+        path = self.follower.path
+        if len(path) < 2:
+            return False
+        start = self.follower.progress
+        segments = np.diff(path, axis=0)
+        lengths = np.hypot(segments[:, 0], segments[:, 1])
+        arc = np.concatenate(([0.0], np.cumsum(lengths)))
+        step = grid.resolution
+        along = np.arange(start, min(start + self.config.blocked_lookahead, arc[-1]), step)
+        if len(along) == 0:
+            return False
+        index = np.clip(np.searchsorted(arc, along, side="right") - 1, 0, len(lengths) - 1)
+        fraction = (along - arc[index]) / np.maximum(lengths[index], 1e-12)
+        points = path[index] + fraction[:, None] * segments[index]
+        radius_cells = self.config.planner.robot_radius / grid.resolution
+        cells = grid.world_to_cell(points)[:, None, :] + _disk_offsets(radius_cells)[None]
+        cells = cells.reshape(-1, 2)
+        inside = grid.contains(cells)
+        cells = cells[inside]
+        return bool(grid.occupied[cells[:, 0], cells[:, 1]].any())
+
+    def _target_explored(self, grid: GridMap) -> bool:
+        """Whether too few of the target frontier's cells are still FREE next to UNKNOWN."""
+        if len(self._target_cells) == 0:
+            return False
+        cells = grid.world_to_cell(self._target_cells)
+        rows, cols = grid.shape
+        inside = grid.contains(cells)
+        if not inside.any():
+            return False
+        cells = cells[inside]
+        free = grid.free[cells[:, 0], cells[:, 1]]
+        near_unknown = np.zeros(len(cells), dtype=bool)
+        for d_row, d_col in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            neighbours = cells + np.array([d_row, d_col])
+            outside = ~grid.contains(neighbours)
+            neighbours = np.clip(neighbours, 0, [rows - 1, cols - 1])
+            near_unknown |= outside | grid.unknown[neighbours[:, 0], neighbours[:, 1]]
+        still = free & near_unknown
+        return bool(still.sum() < self.config.target_gone_fraction * len(self._target_cells))
+
+    def _blacklist_point(self, point: FloatArray) -> None:
+        self._blacklist.append(
+            (float(point[0]), float(point[1]), self._step + self.config.blacklist_steps)
+        )
+
+    # --- replanning ------------------------------------------------------------------------
+
+    def _replan(self, grid: GridMap, pose: FloatArray, reason: str) -> None:
+        config = self.config
+        self.replans += 1
+        self.last_replan_reason = reason
+        self._last_replan_step = self._step
+        self._blacklist = [entry for entry in self._blacklist if entry[2] > self._step]
+        try:
+            cost_grid = inflate(grid, config.planner)
+            distances = distance_field(cost_grid, pose, snap_distance=config.start_snap)
+        except ValueError:
+            self.status = "blocked"
+            self.follower.clear()
+            return
+        if self._given_goal is not None:
+            self._plan_to_given_goal(cost_grid, distances)
+        else:
+            self._plan_to_frontier(grid, cost_grid, distances)
+
+    def _follow(self, cost_grid: CostGrid, cells: IntArray) -> None:
+        self.follower.set_path(cost_grid.cell_to_world(shorten_path(cost_grid, cells)))
+
+    def _plan_to_given_goal(self, cost_grid: CostGrid, distances: DistanceField) -> None:
+        assert self._given_goal is not None
+        goal_cell = _nearest_reachable(distances, self._given_goal, self.config.goal_snap)
+        if goal_cell is None:
+            self.status = "goal_unreachable"
+            self.follower.clear()
+            return
+        self._follow(cost_grid, distances.path_to(goal_cell))
+        self.status = "to_goal"
+
+    def _plan_to_frontier(
+        self, grid: GridMap, cost_grid: CostGrid, distances: DistanceField
+    ) -> None:
+        config = self.config
+        frontiers = extract_frontiers(grid, config.frontiers, reachable=distances.reachable)
+        self._grid_origin, self._grid_resolution = grid.origin, grid.resolution
+        self._frontier_set = frontiers
+        self._frontiers = frontiers.centroids
+        choice = self._choose_frontier(frontiers, distances)
+        if choice < 0:
+            self._empty_replans += 1
+            self._target = None
+            self._target_cells = np.empty((0, 2))
+            self.follower.clear()
+            self.status = "done" if self._empty_replans >= config.done_after else "exploring"
+            return
+        self._empty_replans = 0
+        self._target = frontiers.goals[choice].copy()
+        self._target_cells = grid.cell_to_world(frontiers.cells_of(choice))
+        self._follow(cost_grid, distances.path_to(frontiers.goal_cells[choice]))
+        self.status = "exploring"
+
+    def _current_frontier(self, frontiers: Frontiers) -> int:
+        """The new frontier that continues the current target's frontier, or -1."""
+        if self._target is None or len(self._target_cells) == 0 or len(frontiers) == 0:
+            return -1
+        cells = world_to_cell(self._target_cells, self._grid_origin, self._grid_resolution)
+        return _most_overlapping(frontiers.labels, cells)
+
+    def _choose_frontier(self, frontiers: Frontiers, distances: DistanceField) -> int:
+        """Index of the frontier of highest utility, or -1 when none is worth it."""
+        config = self.config
+        if len(frontiers) == 0:
+            return -1
+        rows, cols = frontiers.goal_cells.T
+        path_costs = distances.cost[rows, cols]
+        gains = frontiers.gains * _separation_discount(
+            frontiers.goals, self._teammate_targets, config.separation
+        )
+        utility = frontier_utility(gains, path_costs, config.cost_weight, min_gain=config.min_gain)
+        if self._blacklist:
+            points = np.array([(x, y) for x, y, _ in self._blacklist])
+            near = _separation_discount(frontiers.goals, points, config.blacklist_radius) < 1.0
+            utility[near] = -np.inf
+        # A goal next to the robot reveals nothing new: its frontier is what the robot
+        # cannot see from here.
+        utility[path_costs < config.follower.goal_tolerance] = -np.inf
+        current = self._current_frontier(frontiers)
+        if current >= 0 and np.isfinite(utility[current]):
+            utility[current] += config.target_bonus
+        utility += config.tie_jitter * self.rng.random(len(utility))
+        best = int(np.argmax(utility))
+        return best if np.isfinite(utility[best]) else -1
+
+
+def _most_overlapping(labels: NDArray[np.int32], cells: IntArray) -> int:
+    """Index of the frontier whose cells overlap ``cells`` (K, 2) most, or -1."""
+    rows, cols = labels.shape
+    inside = (cells[:, 0] >= 0) & (cells[:, 0] < rows) & (cells[:, 1] >= 0) & (cells[:, 1] < cols)
+    hits = labels[cells[inside, 0], cells[inside, 1]]
+    hits = hits[hits > 0]
+    if len(hits) == 0:
+        return -1
+    return int(np.bincount(hits).argmax()) - 1
+
+
+def _nearest_reachable(
+    distances: DistanceField, point: FloatArray, max_distance: float
+) -> IntArray | None:
+    """The reachable cell nearest to ``point`` within ``max_distance`` m, or None."""
+    grid = distances.grid
+    cell = grid.world_to_cell(point)
+    radius = math.ceil(max_distance / grid.resolution)
+    rows, cols = grid.shape
+    r0, r1 = max(int(cell[0]) - radius, 0), min(int(cell[0]) + radius + 1, rows)
+    c0, c1 = max(int(cell[1]) - radius, 0), min(int(cell[1]) + radius + 1, cols)
+    if r0 >= r1 or c0 >= c1:
+        return None
+    candidates = np.argwhere(distances.reachable[r0:r1, c0:c1]) + np.array([r0, c0])
+    if len(candidates) == 0:
+        return None
+    squared = ((candidates - cell) ** 2).sum(axis=1)
+    best = int(np.argmin(squared))
+    if squared[best] > radius**2:
+        return None
+    return np.asarray(candidates[best], dtype=np.int64)

@@ -1,0 +1,425 @@
+"""A pure-pursuit path follower for the env's normalised ``(v, omega)`` actions.
+
+One step per function:
+
+* :func:`lookahead_target`: the point a lookahead distance further along the path than the
+  robot's projection onto it (Coulter, "Implementation of the pure pursuit path tracking
+  algorithm", CMU-RI-TR-92-01, 1992); progress along the path never goes backwards.
+* :func:`pursuit_command`: the arc through that point (curvature ``2 sin(alpha) / L``),
+  with the speed lowered for sharp turns and near the goal, and turning in place when the
+  heading error is large.
+* :func:`limit_rates`: acceleration limits, so the commands change smoothly.
+* :func:`lane_clearance`: free distance ahead of and behind the footprint from a scan, a
+  last-resort guard against driving into what the map does not show yet.
+
+:class:`PathFollower` is the stateful shell: it follows a path, reports when the goal is
+reached, detects when it makes no progress and then backs up and turns (recovery).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mrslam_env.geometry import wrap_scalar
+
+__all__ = [
+    "FollowerConfig",
+    "FollowerStatus",
+    "PathFollower",
+    "lane_clearance",
+    "limit_rates",
+    "lookahead_target",
+    "pursuit_command",
+]
+
+FloatArray = NDArray[np.float64]
+FollowerStatus = Literal["idle", "following", "reached", "recovering"]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class FollowerConfig:
+    """Tuning of :class:`PathFollower`. Speeds in SI units; the action scale comes from
+    the robot (``RobotConfig.max_speed`` and ``max_turn_rate``)."""
+
+    max_speed: float = 1.0
+    """Linear speed at action 1, m/s (``RobotConfig.max_speed``)."""
+    max_turn_rate: float = 2.0
+    """Angular speed at action 1, rad/s (``RobotConfig.max_turn_rate``)."""
+    dt: float = 0.1
+    """Control period, s (``EnvConfig.dt``)."""
+    cruise_speed: float = 0.8
+    """Speed on straight stretches, m/s (<= max_speed)."""
+    min_speed: float = 0.08
+    """Lowest forward speed while driving to the goal, m/s, so that it is reached."""
+    lookahead: float = 0.5
+    """Pure-pursuit lookahead distance, m."""
+    goal_tolerance: float = 0.15
+    """The goal is reached within this distance, m."""
+    goal_deceleration: float = 0.8
+    """Deceleration planned towards the goal: speed <= sqrt(2 a d), m/s^2."""
+    turn_in_place_angle: float = math.radians(50.0)
+    """Heading errors above this turn the robot in place, rad (in (0, pi])."""
+    turn_gain: float = 2.5
+    """Turn rate per radian of heading error when turning in place, 1/s."""
+    max_linear_acceleration: float = 1.5
+    """Largest change of the commanded speed, m/s^2."""
+    max_angular_acceleration: float = 5.0
+    """Largest change of the commanded turn rate, rad/s^2."""
+    stop_distance: float = 0.12
+    """Gap to an obstacle (beyond the footprint) at which driving towards it stops, m."""
+    stuck_steps: int = 30
+    """Steps over which no progress means stuck."""
+    stuck_distance: float = 0.08
+    """Moving less than this (m) and turning less than ``stuck_angle`` over
+    ``stuck_steps`` steps, while commanded to move, is no progress."""
+    stuck_angle: float = math.radians(10.0)
+    """rad; see ``stuck_distance``."""
+    recovery_reverse_steps: int = 8
+    """Recovery: steps backing up."""
+    recovery_turn_steps: int = 8
+    """Recovery: steps turning towards the lookahead point afterwards."""
+    recovery_speed: float = 0.25
+    """Backing-up speed in recovery, m/s."""
+
+    def __post_init__(self) -> None:
+        positive = (
+            "max_speed",
+            "max_turn_rate",
+            "dt",
+            "cruise_speed",
+            "min_speed",
+            "lookahead",
+            "goal_tolerance",
+            "goal_deceleration",
+            "turn_gain",
+            "max_linear_acceleration",
+            "max_angular_acceleration",
+            "stuck_distance",
+            "stuck_angle",
+            "recovery_speed",
+        )
+        for name in positive:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"FollowerConfig.{name} must be > 0, got {value!r}")
+        if not math.isfinite(self.stop_distance) or self.stop_distance < 0:
+            raise ValueError(
+                f"FollowerConfig.stop_distance must be >= 0 m, got {self.stop_distance!r}"
+            )
+        if self.cruise_speed > self.max_speed or self.min_speed > self.cruise_speed:
+            raise ValueError(
+                "FollowerConfig needs min_speed <= cruise_speed <= max_speed, got "
+                f"{self.min_speed}, {self.cruise_speed}, {self.max_speed}"
+            )
+        if self.recovery_speed > self.max_speed:
+            raise ValueError(
+                f"FollowerConfig.recovery_speed must be <= max_speed ({self.max_speed}), "
+                f"got {self.recovery_speed!r}"
+            )
+        if not 0 < self.turn_in_place_angle <= math.pi:
+            raise ValueError(
+                "FollowerConfig.turn_in_place_angle must be in (0, pi], "
+                f"got {self.turn_in_place_angle!r}"
+            )
+        for name in ("stuck_steps", "recovery_reverse_steps", "recovery_turn_steps"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"FollowerConfig.{name} must be an int >= 1, got {value!r}")
+
+
+def lookahead_target(
+    path: FloatArray, position: ArrayLike, progress: float, lookahead: float
+) -> tuple[FloatArray, float]:
+    """The pure-pursuit target point on a polyline.
+
+    Parameters
+    ----------
+    path : ndarray of float64, shape (P, 2)
+        Waypoints, m (P >= 1).
+    position : array_like, shape (2,)
+        The robot, m.
+    progress : float
+        Arc length (m) along the path already passed; the projection is searched only
+        from here on (up to ``progress + 2 * lookahead``), so the robot never snaps back
+        to an earlier part of a path that doubles back.
+    lookahead : float
+        m.
+
+    Returns
+    -------
+    target : ndarray of float64, shape (2,)
+        The path point at arc length ``projection + lookahead`` (the end if beyond).
+    progress : float
+        Arc length of the robot's projection onto the path, m (non-decreasing).
+    """
+    position = np.asarray(position, dtype=np.float64)[:2]
+    if len(path) == 1:
+        return path[0].copy(), 0.0
+    segments = np.diff(path, axis=0)
+    lengths = np.hypot(segments[:, 0], segments[:, 1])
+    starts = np.concatenate(([0.0], np.cumsum(lengths)))
+    total = float(starts[-1])
+    # Projection of the robot on each segment, as an arc length.
+    safe = np.maximum(lengths, 1e-12)
+    t = np.clip(((position - path[:-1]) * segments).sum(axis=1) / safe**2, 0.0, 1.0)
+    projections = path[:-1] + t[:, None] * segments
+    distance = np.hypot(*(projections - position).T)
+    arc = starts[:-1] + t * lengths
+    window = (arc >= progress - 1e-9) & (arc <= progress + 2.0 * lookahead)
+    window |= (starts[1:] >= progress) & (starts[:-1] <= progress + 2.0 * lookahead)
+    if window.any():
+        candidates = np.flatnonzero(window)
+        best = candidates[np.argmin(distance[candidates])]
+        progress = max(progress, float(arc[best]))
+    progress = min(progress, total)
+    along = min(progress + lookahead, total)
+    segment = int(np.clip(np.searchsorted(starts, along, side="right") - 1, 0, len(lengths) - 1))
+    fraction = (along - starts[segment]) / max(lengths[segment], 1e-12)
+    target = path[segment] + min(fraction, 1.0) * segments[segment]
+    return target, progress
+
+
+def pursuit_command(
+    pose: ArrayLike, target: ArrayLike, distance_to_goal: float, config: FollowerConfig
+) -> tuple[float, float]:
+    """Speed and turn rate that drive the robot along the arc through ``target``.
+
+    Parameters
+    ----------
+    pose : array_like, shape (3,)
+        ``(x, y, theta)``, m and rad.
+    target : array_like, shape (2,)
+        m.
+    distance_to_goal : float
+        Remaining path length, m; the speed follows ``sqrt(2 a d)`` near the goal.
+    config : FollowerConfig
+
+    Returns
+    -------
+    v : float
+        m/s, >= 0.
+    omega : float
+        rad/s.
+    """
+    x, y, theta = (float(value) for value in np.asarray(pose, dtype=np.float64)[:3])
+    aim = np.asarray(target, dtype=np.float64)
+    dx, dy = float(aim[0]) - x, float(aim[1]) - y
+    distance = math.hypot(dx, dy)
+    if distance < 1e-9:
+        return 0.0, 0.0
+    alpha = wrap_scalar(math.atan2(dy, dx) - theta)
+    if abs(alpha) > config.turn_in_place_angle:
+        omega = float(
+            np.clip(config.turn_gain * alpha, -config.max_turn_rate, config.max_turn_rate)
+        )
+        return 0.0, omega
+    curvature = 2.0 * math.sin(alpha) / max(distance, 1e-6)
+    speed = config.cruise_speed * (1.0 - abs(alpha) / config.turn_in_place_angle) ** 0.5
+    speed = min(speed, math.sqrt(2.0 * config.goal_deceleration * max(distance_to_goal, 0.0)))
+    speed = max(speed, config.min_speed)
+    if abs(curvature) > 1e-9:
+        speed = min(speed, config.max_turn_rate / abs(curvature))
+    return speed, speed * curvature
+
+
+def limit_rates(
+    previous: tuple[float, float], desired: tuple[float, float], config: FollowerConfig
+) -> tuple[float, float]:
+    """Clamp the change from the previous ``(v, omega)`` (m/s, rad/s) to the
+    acceleration limits over one control period."""
+    dv = config.max_linear_acceleration * config.dt
+    dw = config.max_angular_acceleration * config.dt
+    v = float(np.clip(desired[0], previous[0] - dv, previous[0] + dv))
+    omega = float(np.clip(desired[1], previous[1] - dw, previous[1] + dw))
+    return v, omega
+
+
+def lane_clearance(
+    scan: ArrayLike, angles: ArrayLike, robot_radius: float, *, lane_margin: float = 0.02
+) -> tuple[float, float]:
+    """Free distance ahead of and behind the robot's footprint, from one scan.
+
+    A return counts when it lies in the lane the footprint sweeps driving straight
+    (half-width ``robot_radius + lane_margin``).
+
+    Parameters
+    ----------
+    scan : array_like, shape (N,)
+        Ranges, m.
+    angles : array_like, shape (N,)
+        Beam angles from the heading, rad.
+    robot_radius : float
+        m.
+    lane_margin : float
+        m.
+
+    Returns
+    -------
+    front, rear : float
+        Gap from the front (rear) edge of the footprint to the nearest return in the
+        lane, m (``inf`` when none).
+    """
+    ranges = np.asarray(scan, dtype=np.float64)
+    beam_angles = np.asarray(angles, dtype=np.float64)
+    x = ranges * np.cos(beam_angles)
+    y = ranges * np.sin(beam_angles)
+    lane = np.abs(y) < robot_radius + lane_margin
+    # Along the lane the footprint's front edge is at x = sqrt(r^2 - y^2).
+    edge = np.sqrt(np.maximum(robot_radius**2 - y**2, 0.0))
+    ahead = lane & (x > 0)
+    behind = lane & (x < 0)
+    front = float(np.min(x[ahead] - edge[ahead], initial=np.inf))
+    rear = float(np.min(-x[behind] - edge[behind], initial=np.inf))
+    return front, rear
+
+
+class PathFollower:
+    """Follows a map-frame path with pure pursuit; outputs normalised actions.
+
+    Call :meth:`set_path`, then :meth:`step` once per control period with the robot's
+    pose (in the path's frame). :attr:`status` says ``"following"``, ``"reached"`` (goal
+    within ``goal_tolerance``; the robot is brought to rest), ``"recovering"`` (stuck:
+    backing up, then turning) or ``"idle"`` (no path). :attr:`stuck_events` counts how
+    often it got stuck, so the caller can replan.
+
+    Parameters
+    ----------
+    config : FollowerConfig, optional
+    """
+
+    def __init__(self, config: FollowerConfig | None = None) -> None:
+        self.config = config if config is not None else FollowerConfig()
+        self._path = np.empty((0, 2))
+        self._length = 0.0
+        self._progress = 0.0
+        self._command = (0.0, 0.0)
+        self._history: list[tuple[float, float, float]] = []
+        self._recovery_left = 0
+        self.status: FollowerStatus = "idle"
+        self.stuck_events = 0
+
+    @property
+    def path(self) -> FloatArray:
+        """The path being followed, (P, 2) m (a copy)."""
+        return self._path.copy()
+
+    @property
+    def command(self) -> tuple[float, float]:
+        """The last command ``(v m/s, omega rad/s)``."""
+        return self._command
+
+    @property
+    def progress(self) -> float:
+        """Arc length of the path already passed, m."""
+        return self._progress
+
+    @property
+    def remaining(self) -> float:
+        """Path length left, m."""
+        return max(self._length - self._progress, 0.0)
+
+    def set_path(self, path: ArrayLike) -> None:
+        """Start following ``path`` (P, 2), m. An empty path stops the robot."""
+        waypoints = np.asarray(path, dtype=np.float64).reshape(-1, 2)
+        if not np.all(np.isfinite(waypoints)):
+            raise ValueError("PathFollower.set_path: the path holds non-finite points")
+        self._path = waypoints.copy()
+        self._length = (
+            float(np.hypot(*np.diff(waypoints, axis=0).T).sum()) if len(waypoints) else 0.0
+        )
+        self._progress = 0.0
+        # The motion history survives a new path: replanning is no way out of being stuck.
+        if self.status != "recovering":
+            self.status = "following" if len(waypoints) else "idle"
+
+    def clear(self) -> None:
+        """Drop the path; the robot brakes to a stop."""
+        self._path = np.empty((0, 2))
+        self._length = 0.0
+        self._progress = 0.0
+        self._history.clear()
+        self._recovery_left = 0
+        self.status = "idle"
+
+    def step(
+        self, pose: ArrayLike, *, clearance: tuple[float, float] | None = None
+    ) -> NDArray[np.float32]:
+        """One normalised action ``(v, omega)`` in [-1, 1] for the current pose.
+
+        Parameters
+        ----------
+        pose : array_like, shape (3,)
+            ``(x, y, theta)`` in the path's frame.
+        clearance : tuple of float, optional
+            ``(front, rear)`` free distances from :func:`lane_clearance`; motion towards
+            a side closer than ``stop_distance`` is stopped (turning still works).
+        """
+        config = self.config
+        robot = np.asarray(pose, dtype=np.float64)[:3]
+        wanted = self._desired(robot)
+        desired = wanted
+        if clearance is not None:
+            front, rear = clearance
+            if (wanted[0] > 0 and front < config.stop_distance) or (
+                wanted[0] < 0 and rear < config.stop_distance
+            ):
+                desired = (0.0, wanted[1])
+        self._command = limit_rates(self._command, desired, config)
+        # Progress is judged against what the follower wanted: a guard stop is no excuse.
+        self._watch_progress(robot, wanted)
+        action = np.array(
+            [self._command[0] / config.max_speed, self._command[1] / config.max_turn_rate]
+        )
+        return np.clip(action, -1.0, 1.0).astype(np.float32)
+
+    def _desired(self, robot: FloatArray) -> tuple[float, float]:
+        config = self.config
+        if len(self._path) == 0:
+            return 0.0, 0.0
+        target, self._progress = lookahead_target(
+            self._path, robot[:2], self._progress, config.lookahead
+        )
+        if self.status == "recovering":
+            self._recovery_left -= 1
+            if self._recovery_left >= config.recovery_turn_steps:
+                return -config.recovery_speed, 0.0
+            if self._recovery_left <= 0:
+                self.status = "following"
+                self._history.clear()
+            heading = math.atan2(target[1] - robot[1], target[0] - robot[0])
+            error = wrap_scalar(heading - robot[2])
+            turn = float(np.clip(config.turn_gain * error, -1.0, 1.0)) * config.max_turn_rate
+            return 0.0, turn
+        goal = self._path[-1]
+        to_goal = math.hypot(goal[0] - robot[0], goal[1] - robot[1])
+        if self.status == "reached" or to_goal < config.goal_tolerance:
+            self.status = "reached"
+            return 0.0, 0.0
+        remaining = max(self.remaining, to_goal) - config.goal_tolerance
+        return pursuit_command(robot, target, remaining, config)
+
+    def _watch_progress(self, robot: FloatArray, desired: tuple[float, float]) -> None:
+        """Start a recovery after ``stuck_steps`` steps of being told to move without
+        moving or turning."""
+        config = self.config
+        if self.status != "following" or (desired[0] == 0.0 and desired[1] == 0.0):
+            self._history.clear()
+            return
+        self._history.append((float(robot[0]), float(robot[1]), float(robot[2])))
+        if len(self._history) <= config.stuck_steps:
+            return
+        del self._history[0]
+        x0, y0, theta0 = self._history[0]
+        moved = math.hypot(robot[0] - x0, robot[1] - y0)
+        turned = abs(wrap_scalar(float(robot[2]) - theta0))
+        if moved < config.stuck_distance and turned < config.stuck_angle:
+            self.status = "recovering"
+            self.stuck_events += 1
+            self._command = (0.0, 0.0)  # it is not moving, whatever was commanded
+            self._recovery_left = config.recovery_reverse_steps + config.recovery_turn_steps
+            self._history.clear()

@@ -1,0 +1,522 @@
+"""Frontier extraction on an occupancy grid (DESIGN §6, building blocks).
+
+A frontier is the border between known free space and unknown space: where a robot must go
+to see more (Yamauchi, "A frontier-based approach for autonomous exploration", 1997).
+One step per function:
+
+1. :func:`frontier_cells`: FREE cells with an UNKNOWN 4- or 8-neighbour (cells outside the
+   grid count as UNKNOWN); tiny unknown specks inside mapped space (beams too sparse at
+   long range) do not count.
+2. :func:`cluster_frontiers`: connected components of frontier cells (8-connected), small
+   ones dropped, long ones split into pieces of at most ``max_size`` along their main axis.
+3. :func:`information_gain`: the unknown area within sensor range of a point, read from an
+   integral image of the known cells in O(1) per point (a cheap upper bound), or
+   :func:`connected_information_gain`: only the unknown space that the frontier opens onto
+   (its 4-connected unknown regions), so that unknown space behind a mapped wall (outside
+   the building, inside a pillar) does not lure the robot.
+4. :func:`extract_frontiers` puts them together and gives each frontier a goal cell the
+   robot can reach (the reachable cell nearest to the frontier's middle).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+
+from mrslam_env.gridmap import GridMap
+
+__all__ = [
+    "FrontierConfig",
+    "Frontiers",
+    "cluster_frontiers",
+    "connected_information_gain",
+    "extract_frontiers",
+    "frontier_cells",
+    "information_gain",
+    "known_integral_image",
+]
+
+GainModel = Literal["box", "connected"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class FrontierConfig:
+    """How frontiers are found, grouped and valued."""
+
+    connectivity: int = 4
+    """A FREE cell is a frontier cell when one of its 4 (edge) or 8 (edge and corner)
+    neighbours is UNKNOWN: 4 or 8."""
+    min_unknown_area: float = 0.05
+    """Connected UNKNOWN regions smaller than this, m², are specks inside mapped space and
+    make no frontier (>= 0; 0 keeps every unknown cell)."""
+    min_free_width: int = 3
+    """Frontier cells must belong to FREE space at least this many cells wide (a
+    morphological opening with a square of this side; 1 turns it off)."""
+    min_size: float = 0.25
+    """Frontiers shorter than this are dropped, m (size = cell count x resolution)."""
+    max_size: float = 3.0
+    """Longer frontiers are split into pieces of at most this size, m (> min_size)."""
+    sensor_range: float = 4.0
+    """Half-width of the square around a goal in which unknown area counts as the
+    information gain, m (> 0); a cheap stand-in for the lidar's reach."""
+    gain_model: GainModel = "connected"
+    """``"box"``: all unknown area in the square (:func:`information_gain`);
+    ``"connected"``: only unknown regions the frontier touches
+    (:func:`connected_information_gain`)."""
+    view_depth: float = 4.0
+    """The gain of a frontier is at most its size times this depth, m² per m (> 0): one
+    sees only so much through a narrow gap, however much unknown space lies behind it
+    (often the outside of the building, behind a wall not yet mapped)."""
+    min_open_fraction: float = 0.15
+    """With the ``"connected"`` model, an unknown region enclosed in the map whose border
+    is FREE on less than this fraction (the rest OCCUPIED) is an obstacle's inside and
+    counts no gain, in [0, 1]."""
+    max_goal_offset: float = 1.5
+    """Largest distance from a frontier cell to the reachable goal cell that views it, m;
+    frontiers with no reachable cell this close are dropped (> 0)."""
+
+    def __post_init__(self) -> None:
+        if self.connectivity not in (4, 8):
+            raise ValueError(
+                f"FrontierConfig.connectivity must be 4 or 8, got {self.connectivity!r}"
+            )
+        width = self.min_free_width
+        if not isinstance(width, int) or isinstance(width, bool) or width < 1:
+            raise ValueError(f"FrontierConfig.min_free_width must be an int >= 1, got {width!r}")
+        for name in ("min_unknown_area", "min_size"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"FrontierConfig.{name} must be >= 0, got {value!r}")
+        for name in ("sensor_range", "max_goal_offset", "view_depth"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"FrontierConfig.{name} must be > 0 m, got {value!r}")
+        if self.gain_model not in ("box", "connected"):
+            raise ValueError(
+                f"FrontierConfig.gain_model must be 'box' or 'connected', got {self.gain_model!r}"
+            )
+        if not 0 <= self.min_open_fraction <= 1:
+            raise ValueError(
+                "FrontierConfig.min_open_fraction must be in [0, 1], "
+                f"got {self.min_open_fraction!r}"
+            )
+        if not (math.isfinite(self.max_size) and self.max_size > self.min_size):
+            raise ValueError(
+                f"FrontierConfig.max_size must be > min_size ({self.min_size}), "
+                f"got {self.max_size!r}"
+            )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True, eq=False)
+class Frontiers:
+    """The frontiers of one map, as parallel arrays (F frontiers).
+
+    Attributes
+    ----------
+    labels : ndarray of int32, shape (rows, cols)
+        Frontier index + 1 of each frontier cell, 0 elsewhere.
+    centroids : ndarray of float64, shape (F, 2)
+        Map-frame mean ``(x, y)`` of each frontier's cells, m.
+    sizes : ndarray of float64, shape (F,)
+        Cell count times resolution, m.
+    goal_cells : ndarray of int64, shape (F, 2)
+        A reachable cell ``(row, col)`` from which the frontier is seen.
+    goals : ndarray of float64, shape (F, 2)
+        Map-frame centres of ``goal_cells``, m.
+    gains : ndarray of float64, shape (F,)
+        Unknown area within ``sensor_range`` of the goal (``gain_model``), at most
+        ``size * view_depth``, m².
+    """
+
+    labels: NDArray[np.int32]
+    centroids: FloatArray
+    sizes: FloatArray
+    goal_cells: IntArray
+    goals: FloatArray
+    gains: FloatArray
+
+    def __len__(self) -> int:
+        return len(self.sizes)
+
+    def cells_of(self, index: int) -> IntArray:
+        """Cells ``(row, col)`` (K, 2) of frontier ``index``."""
+        return np.argwhere(self.labels == index + 1)
+
+
+def _padded_unknown(grid: GridMap, min_unknown_area: float) -> BoolArray:
+    """UNKNOWN mask padded by one ring of UNKNOWN (outside the grid), specks removed."""
+    unknown = np.pad(grid.unknown, 1, constant_values=True)
+    min_cells = min_unknown_area / grid.resolution**2
+    if min_cells > 1:
+        labels, count = ndimage.label(unknown, structure=np.ones((3, 3), dtype=bool))
+        if count:
+            sizes = np.bincount(labels.ravel(), minlength=count + 1)
+            keep = sizes >= min_cells
+            keep[0] = False
+            keep[labels[0, 0]] = True  # the outside is never a speck
+            unknown = keep[labels]
+    return unknown
+
+
+def frontier_cells(
+    grid: GridMap,
+    config: FrontierConfig | None = None,
+    *,
+    reachable: BoolArray | None = None,
+) -> BoolArray:
+    """FREE cells next to UNKNOWN space.
+
+    Parameters
+    ----------
+    grid : GridMap
+    config : FrontierConfig, optional
+        Uses ``connectivity`` and ``min_unknown_area``.
+    reachable : ndarray of bool, shape (rows, cols), optional
+        Cells the robot can reach; when given, only frontier cells within
+        ``max_goal_offset`` of one are kept.
+
+    Returns
+    -------
+    ndarray of bool, shape (rows, cols)
+    """
+    config = config if config is not None else FrontierConfig()
+    unknown = _padded_unknown(grid, config.min_unknown_area)
+    structure = ndimage.generate_binary_structure(2, 1 if config.connectivity == 4 else 2)
+    near_unknown = ndimage.binary_dilation(unknown, structure=structure)[1:-1, 1:-1]
+    free = grid.free
+    if config.min_free_width > 1:
+        # Single beams through gaps leave one-cell-wide streaks of FREE in unknown space
+        # (often outside the building): no place to go, and all frontier along their length.
+        width = config.min_free_width
+        free = ndimage.binary_opening(free, structure=np.ones((width, width), dtype=bool))
+    cells = free & near_unknown
+    if reachable is not None:
+        cells &= _near_reachable(reachable, grid.resolution, config.max_goal_offset)
+    return cells
+
+
+def _near_reachable(reachable: BoolArray, resolution: float, distance: float) -> BoolArray:
+    if not reachable.any():
+        return np.zeros_like(reachable)
+    return np.asarray(ndimage.distance_transform_edt(~reachable) * resolution <= distance)
+
+
+def cluster_frontiers(
+    cells: BoolArray, resolution: float, config: FrontierConfig | None = None
+) -> tuple[NDArray[np.int32], int]:
+    """Group frontier cells into frontiers.
+
+    8-connected components; components shorter than ``min_size`` are dropped; a component
+    longer than ``max_size`` is cut into ``ceil(size / max_size)`` pieces of equal cell
+    count along its principal axis.
+
+    Parameters
+    ----------
+    cells : ndarray of bool, shape (rows, cols)
+        Frontier cells (:func:`frontier_cells`).
+    resolution : float
+        m per cell.
+    config : FrontierConfig, optional
+
+    Returns
+    -------
+    labels : ndarray of int32, shape (rows, cols)
+        Frontier index + 1 per cell, 0 = no frontier.
+    count : int
+        Number of frontiers.
+    """
+    config = config if config is not None else FrontierConfig()
+    components, count = ndimage.label(cells, structure=np.ones((3, 3), dtype=bool))
+    labels = np.zeros(cells.shape, dtype=np.int32)
+    if count == 0:
+        return labels, 0
+    min_cells = config.min_size / resolution
+    max_cells = max(config.max_size / resolution, 1.0)
+    next_label = 1
+    for index, window in enumerate(ndimage.find_objects(components), start=1):
+        if window is None:
+            continue
+        local = np.argwhere(components[window] == index)
+        if len(local) < min_cells:
+            continue
+        pieces = math.ceil(len(local) / max_cells)
+        piece = np.zeros(len(local), dtype=np.int64)
+        if pieces > 1:
+            centred = local - local.mean(axis=0)
+            # Principal axis of the cell cloud: the eigenvector of the largest eigenvalue.
+            _, vectors = np.linalg.eigh(centred.T @ centred)
+            order = np.argsort(centred @ vectors[:, -1], kind="stable")
+            piece[order] = np.arange(len(local)) * pieces // len(local)
+        rows = local[:, 0] + window[0].start
+        cols = local[:, 1] + window[1].start
+        labels[rows, cols] = next_label + piece
+        next_label += pieces
+    return labels, next_label - 1
+
+
+def known_integral_image(grid: GridMap) -> NDArray[np.int64]:
+    """Summed-area table of the known (FREE or OCCUPIED) cells.
+
+    Returns
+    -------
+    ndarray of int64, shape (rows + 1, cols + 1)
+        ``table[r, c]`` = number of known cells in ``cells[:r, :c]``.
+    """
+    known = (~grid.unknown).astype(np.int64)
+    table = np.zeros((grid.shape[0] + 1, grid.shape[1] + 1), dtype=np.int64)
+    table[1:, 1:] = known.cumsum(axis=0).cumsum(axis=1)
+    return table
+
+
+def information_gain(
+    grid: GridMap,
+    points: ArrayLike,
+    sensor_range: float,
+    *,
+    integral: NDArray[np.int64] | None = None,
+) -> FloatArray:
+    """Unknown area in the square of half-width ``sensor_range`` around each point.
+
+    Space outside the grid is unknown (the SLAM grid only covers what was seen, plus a
+    margin). Walls are ignored, so unknown space behind them counts too: a cheap upper
+    bound, good enough to rank frontiers.
+
+    Parameters
+    ----------
+    grid : GridMap
+    points : array_like, shape (N, 2)
+        Map-frame ``(x, y)``, m.
+    sensor_range : float
+        m.
+    integral : ndarray, optional
+        :func:`known_integral_image` of ``grid``, to share between calls.
+
+    Returns
+    -------
+    ndarray of float64, shape (N,)
+        m².
+    """
+    table = known_integral_image(grid) if integral is None else integral
+    cells = grid.world_to_cell(np.asarray(points, dtype=np.float64).reshape(-1, 2))
+    half = max(round(sensor_range / grid.resolution), 0)
+    rows, cols = grid.shape
+    r0 = np.clip(cells[:, 0] - half, 0, rows)
+    r1 = np.clip(cells[:, 0] + half + 1, 0, rows)
+    c0 = np.clip(cells[:, 1] - half, 0, cols)
+    c1 = np.clip(cells[:, 1] + half + 1, 0, cols)
+    known = table[r1, c1] - table[r0, c1] - table[r1, c0] + table[r0, c0]
+    box = (2 * half + 1) ** 2
+    return (box - known).astype(np.float64) * grid.resolution**2
+
+
+def connected_information_gain(
+    grid: GridMap,
+    labels: NDArray[np.int32],
+    points: ArrayLike,
+    sensor_range: float,
+    *,
+    min_open_fraction: float = 0.0,
+) -> FloatArray:
+    """Unknown area near each frontier's goal that the frontier actually opens onto.
+
+    Unknown space is split into 4-connected regions (a mapped wall, even a diagonal run of
+    cells, separates them; cells outside the grid join the region touching the border).
+    Frontier ``f`` counts, in the square of half-width ``sensor_range`` around
+    ``points[f]``, only the cells of the regions adjacent to its own cells. A region inside
+    the grid whose border is almost all wall (FREE on less than ``min_open_fraction`` of
+    its border) is the inside of an obstacle seen through a gap in its mapped outline and
+    counts nothing.
+
+    Parameters
+    ----------
+    grid : GridMap
+    labels : ndarray of int32, shape (rows, cols)
+        Frontier index + 1 per cell (:func:`cluster_frontiers`), F frontiers.
+    points : array_like, shape (F, 2)
+        Map-frame goal of each frontier, m.
+    sensor_range : float
+        m.
+    min_open_fraction : float
+        In [0, 1].
+
+    Returns
+    -------
+    ndarray of float64, shape (F,)
+        m².
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    count = len(points)
+    gains = np.zeros(count)
+    if count == 0:
+        return gains
+    rows, cols = grid.shape
+    unknown = np.pad(grid.unknown, 1, constant_values=True)
+    regions, region_count = ndimage.label(unknown)
+    outside = regions[0, 0]
+    # The unknown regions each frontier touches: labels of its cells' 4-neighbours.
+    frontier_rows, frontier_cols = np.nonzero(labels)
+    owner = labels[frontier_rows, frontier_cols] - 1
+    touches = np.zeros((count, region_count + 1), dtype=bool)
+    for d_row, d_col in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        touched = regions[frontier_rows + 1 + d_row, frontier_cols + 1 + d_col]
+        touches[owner, touched] = True
+    touches[:, 0] = False
+    touches[
+        :, _enclosed_regions(regions, region_count, np.pad(grid.free, 1), min_open_fraction)
+    ] = False
+    half = max(round(sensor_range / grid.resolution), 0)
+    box = (2 * half + 1) ** 2
+    centres = grid.world_to_cell(points) + 1  # padded coordinates
+    for frontier in range(count):
+        row, col = centres[frontier]
+        r0, r1 = max(row - half, 0), min(row + half + 1, rows + 2)
+        c0, c1 = max(col - half, 0), min(col + half + 1, cols + 2)
+        window = regions[r0:r1, c0:c1] if r0 < r1 and c0 < c1 else regions[:0, :0]
+        cells = int(touches[frontier][window].sum())
+        if outside and touches[frontier, outside]:
+            cells += box - window.size  # the square's part beyond the padded grid
+        gains[frontier] = cells
+    return gains * grid.resolution**2
+
+
+def _enclosed_regions(
+    regions: NDArray[np.int32], region_count: int, free: BoolArray, min_open_fraction: float
+) -> NDArray[np.bool_]:
+    """(region_count + 1,) bool: unknown regions not touching the border whose border
+    cells are FREE less than ``min_open_fraction`` of the time (the rest is OCCUPIED)."""
+    enclosed = np.zeros(region_count + 1, dtype=bool)
+    if min_open_fraction <= 0 or region_count == 0:
+        return enclosed
+    border = np.zeros(region_count + 1)
+    open_border = np.zeros(region_count + 1)
+    inner = regions[1:-1, 1:-1]
+    for d_row, d_col in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        neighbour = regions[
+            1 + d_row : regions.shape[0] - 1 + d_row, 1 + d_col : regions.shape[1] - 1 + d_col
+        ]
+        neighbour_free = free[
+            1 + d_row : free.shape[0] - 1 + d_row, 1 + d_col : free.shape[1] - 1 + d_col
+        ]
+        edge = (inner > 0) & (neighbour == 0)
+        border += np.bincount(inner[edge], minlength=region_count + 1)
+        open_border += np.bincount(inner[edge & neighbour_free], minlength=region_count + 1)
+    enclosed = open_border < min_open_fraction * np.maximum(border, 1)
+    enclosed[0] = False
+    enclosed[regions[0, 0]] = False  # the region around the grid is never an obstacle
+    return enclosed
+
+
+def _goal_cells(
+    labels: NDArray[np.int32],
+    count: int,
+    centroid_cells: FloatArray,
+    reachable: BoolArray,
+    resolution: float,
+    max_goal_offset: float,
+) -> tuple[IntArray, BoolArray]:
+    """Per frontier: the reachable cell nearest to its cell closest to its centroid.
+
+    If that cell is too far from anything reachable, the frontier cell nearest to the
+    reachable space is used instead; the frontier is invalid when even that is farther
+    than ``max_goal_offset``.
+    """
+    goal_cells = np.zeros((count, 2), dtype=np.int64)
+    valid = np.zeros(count, dtype=bool)
+    if count == 0 or not reachable.any():
+        return goal_cells, valid
+    distance, nearest = ndimage.distance_transform_edt(~reachable, return_indices=True)
+    distance = distance * resolution
+    cells = np.argwhere(labels > 0)
+    owner = labels[cells[:, 0], cells[:, 1]] - 1
+    to_centroid = ((cells - centroid_cells[owner]) ** 2).sum(axis=1)
+    to_reachable = distance[cells[:, 0], cells[:, 1]]
+    # The middle cell when it is close enough to reachable space, else the closest cell.
+    middle_ok = to_reachable <= max_goal_offset
+    key = np.where(middle_ok, to_centroid, np.inf)
+    fallback = np.where(middle_ok, np.inf, to_reachable)
+    for frontier in range(count):
+        mine = np.flatnonzero(owner == frontier)
+        if len(mine) == 0:
+            continue
+        if np.isfinite(key[mine]).any():
+            best = mine[np.argmin(key[mine])]
+        else:
+            best = mine[np.argmin(fallback[mine])]
+            if to_reachable[best] > max_goal_offset:
+                continue
+        row, col = cells[best]
+        goal_cells[frontier] = (nearest[0][row, col], nearest[1][row, col])
+        valid[frontier] = True
+    return goal_cells, valid
+
+
+def extract_frontiers(
+    grid: GridMap,
+    config: FrontierConfig | None = None,
+    *,
+    reachable: BoolArray | None = None,
+) -> Frontiers:
+    """All frontiers of a map with their goals and information gains.
+
+    Parameters
+    ----------
+    grid : GridMap
+    config : FrontierConfig, optional
+    reachable : ndarray of bool, shape (rows, cols), optional
+        Cells the robot can reach (e.g. ``DistanceField.reachable``). When given, each
+        frontier's goal is a reachable cell and frontiers with none within
+        ``max_goal_offset`` are dropped; without it, FREE cells count as reachable.
+
+    Returns
+    -------
+    Frontiers
+        Sorted by decreasing size.
+    """
+    config = config if config is not None else FrontierConfig()
+    reach = grid.free if reachable is None else np.asarray(reachable, dtype=bool)
+    if reach.shape != grid.shape:
+        raise ValueError(f"reachable has shape {reach.shape}, the map {grid.shape}")
+    cells = frontier_cells(grid, config)
+    labels, count = cluster_frontiers(cells, grid.resolution, config)
+    frontier_rows, frontier_cols = np.nonzero(labels)
+    owner = labels[frontier_rows, frontier_cols]
+    sizes = np.bincount(owner, minlength=count + 1)[1:].astype(np.float64)
+    safe = np.maximum(sizes, 1.0)
+    centroid_cells = np.stack(
+        [
+            np.bincount(owner, weights=frontier_rows, minlength=count + 1)[1:] / safe,
+            np.bincount(owner, weights=frontier_cols, minlength=count + 1)[1:] / safe,
+        ],
+        axis=1,
+    ).reshape(-1, 2)
+    goal_cells, valid = _goal_cells(
+        labels, count, centroid_cells, reach, grid.resolution, config.max_goal_offset
+    )
+    order = np.flatnonzero(valid)
+    order = order[np.argsort(-sizes[order], kind="stable")]
+    relabel = np.zeros(count + 1, dtype=np.int32)
+    relabel[order + 1] = np.arange(1, len(order) + 1, dtype=np.int32)
+    goals = grid.cell_to_world(goal_cells[order]).reshape(-1, 2)
+    labels = relabel[labels]
+    if config.gain_model == "box":
+        gains = information_gain(grid, goals, config.sensor_range)
+    else:
+        gains = connected_information_gain(grid, labels, goals, config.sensor_range)
+    gains = np.minimum(gains, sizes[order] * grid.resolution * config.view_depth)
+    return Frontiers(
+        labels=labels,
+        centroids=grid.cell_to_world(centroid_cells[order]).reshape(-1, 2),
+        sizes=sizes[order] * grid.resolution,
+        goal_cells=goal_cells[order],
+        goals=goals,
+        gains=gains,
+    )

@@ -1,0 +1,609 @@
+"""Path planning on an inflated occupancy grid (DESIGN §6, building blocks).
+
+Three steps, one function each:
+
+1. :func:`inflate` turns a trinary :class:`~mrslam_env.gridmap.GridMap` into a
+   :class:`CostGrid`: cells closer to an OCCUPIED cell than the robot radius plus a safety
+   margin are blocked (``inf``); the others cost ``1`` plus a soft penalty that decays with
+   the distance to the nearest wall, so that shortest paths keep clearance; UNKNOWN cells
+   are either blocked or cost a configurable multiple.
+2. :func:`distance_field` runs one Dijkstra search from the robot over the 8-connected
+   grid (a numba kernel) and returns the path cost to every cell plus the tree to trace a
+   path back; :func:`plan_path` is the single-goal query (the same search, stopped at the
+   goal).
+3. :func:`shorten_path` prunes the cell path by line of sight on the cost grid, without
+   giving up the clearance the soft cost bought.
+
+An edge between neighbouring cells ``a`` and ``b`` costs ``length * (c[a] + c[b]) / 2``
+(``length`` = resolution or resolution * sqrt(2), metres), so on an all-free map far from
+walls a path's cost is its length in metres. A diagonal step is allowed only when both
+cells it cuts between are passable (no squeezing between two blocked cells).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numba
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+
+from mrslam_env.geometry import cell_to_world, world_to_cell
+from mrslam_env.gridmap import GridMap
+
+__all__ = [
+    "CostGrid",
+    "DistanceField",
+    "PlannerConfig",
+    "distance_field",
+    "inflate",
+    "line_is_clear",
+    "nearest_passable_cell",
+    "plan_path",
+    "shorten_path",
+    "trace_path",
+]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+UnknownPolicy = Literal["blocked", "costly"]
+
+# 8-connected neighbourhood (row step, column step), orthogonal moves first.
+_NEIGHBOUR_ROWS = np.array([1, -1, 0, 0, 1, 1, -1, -1], dtype=np.int64)
+_NEIGHBOUR_COLS = np.array([0, 0, 1, -1, 1, -1, 1, -1], dtype=np.int64)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PlannerConfig:
+    """How a map becomes a cost grid."""
+
+    robot_radius: float = 0.2
+    """Footprint radius, m (``RobotConfig.radius``)."""
+    safety_margin: float = 0.08
+    """Added to the radius: a cell whose centre is closer than ``robot_radius +
+    safety_margin`` to an OCCUPIED cell's centre is blocked, m (>= 0)."""
+    clearance: float = 0.5
+    """Width of the soft-cost band beyond the blocked zone, m (>= 0; 0 turns it off)."""
+    clearance_cost: float = 4.0
+    """Extra cost multiplier at the edge of the blocked zone, decaying quadratically to 0
+    across the ``clearance`` band (>= 0): a cell touching the blocked zone costs
+    ``1 + clearance_cost`` times a free cell."""
+    unknown: UnknownPolicy = "blocked"
+    """UNKNOWN cells: ``"blocked"`` (never entered) or ``"costly"`` (entered at
+    ``unknown_cost`` times the cost of a free cell)."""
+    unknown_cost: float = 5.0
+    """Cost multiplier of an UNKNOWN cell when ``unknown == "costly"`` (>= 1)."""
+
+    def __post_init__(self) -> None:
+        for name in ("robot_radius",):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"PlannerConfig.{name} must be > 0 m, got {value!r}")
+        for name in ("safety_margin", "clearance", "clearance_cost"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"PlannerConfig.{name} must be >= 0, got {value!r}")
+        if self.unknown not in ("blocked", "costly"):
+            raise ValueError(
+                f"PlannerConfig.unknown must be 'blocked' or 'costly', got {self.unknown!r}"
+            )
+        if not (math.isfinite(self.unknown_cost) and self.unknown_cost >= 1):
+            raise ValueError(f"PlannerConfig.unknown_cost must be >= 1, got {self.unknown_cost!r}")
+
+    @property
+    def blocked_radius(self) -> float:
+        """Distance from a wall cell inside which a cell is blocked, m."""
+        return self.robot_radius + self.safety_margin
+
+
+@dataclass(frozen=True, slots=True, kw_only=True, eq=False)
+class CostGrid:
+    """Per-cell traversal cost of a map, on the map's own grid.
+
+    Attributes
+    ----------
+    cost : ndarray of float64, shape (rows, cols)
+        Cost multiplier per cell, ``>= 1``; ``inf`` = blocked.
+    wall_distance : ndarray of float64, shape (rows, cols)
+        Distance from each cell centre to the nearest OCCUPIED cell centre, m (``inf``
+        when the map has no OCCUPIED cell).
+    resolution : float
+        Cell edge, m.
+    origin : tuple of float
+        Map-frame ``(x, y)`` of the outer corner of cell [0, 0], m.
+    """
+
+    cost: FloatArray
+    wall_distance: FloatArray
+    resolution: float
+    origin: tuple[float, float]
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (int(self.cost.shape[0]), int(self.cost.shape[1]))
+
+    @property
+    def passable(self) -> NDArray[np.bool_]:
+        """Cells the robot's centre may occupy (finite cost), (rows, cols) bool."""
+        return np.isfinite(self.cost)
+
+    def world_to_cell(self, points: ArrayLike) -> IntArray:
+        """Cell indices ``(iy, ix)`` of map-frame points ``(x, y)``, not clipped."""
+        return world_to_cell(points, self.origin, self.resolution)
+
+    def cell_to_world(self, cells: ArrayLike) -> FloatArray:
+        """Map-frame centres ``(x, y)`` of cells ``(iy, ix)``."""
+        return cell_to_world(cells, self.origin, self.resolution)
+
+    def contains(self, cells: ArrayLike) -> NDArray[np.bool_]:
+        c = np.asarray(cells)
+        rows, cols = self.shape
+        return (c[..., 0] >= 0) & (c[..., 0] < rows) & (c[..., 1] >= 0) & (c[..., 1] < cols)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True, eq=False)
+class DistanceField:
+    """Result of one Dijkstra search from a start cell.
+
+    Attributes
+    ----------
+    cost : ndarray of float64, shape (rows, cols)
+        Path cost from the start to every cell (metres weighted by the cell costs; equal
+        to path length where the cost multiplier is 1); ``inf`` = unreachable. With an
+        early stop at a goal, only cells settled before the goal hold final values.
+    parent : ndarray of int64, shape (rows, cols)
+        Flat index (``row * cols + col``) of each reached cell's predecessor; ``-1`` at
+        the start and at unreached cells.
+    start : tuple of int
+        The start cell ``(row, col)`` (after :func:`nearest_passable_cell`).
+    grid : CostGrid
+        The cost grid searched.
+    """
+
+    cost: FloatArray
+    parent: IntArray
+    start: tuple[int, int]
+    grid: CostGrid
+
+    @property
+    def reachable(self) -> NDArray[np.bool_]:
+        """(rows, cols) bool: cells with a finite path cost."""
+        return np.isfinite(self.cost)
+
+    def path_to(self, goal_cell: ArrayLike) -> IntArray:
+        """Cells ``(row, col)`` (P, 2) from the start to ``goal_cell``; empty if unreached."""
+        return trace_path(self.parent, np.asarray(goal_cell, dtype=np.int64), self.start)
+
+
+def inflate(grid: GridMap, config: PlannerConfig | None = None) -> CostGrid:
+    """The cost grid of a map: blocked near walls, soft cost for clearance.
+
+    Parameters
+    ----------
+    grid : GridMap
+        Trinary map (any frame).
+    config : PlannerConfig, optional
+
+    Returns
+    -------
+    CostGrid
+        Same shape, resolution and origin as ``grid``.
+
+    Raises
+    ------
+    ValueError
+        If the map has no FREE cell.
+    """
+    config = config if config is not None else PlannerConfig()
+    if not grid.free.any():
+        raise ValueError("cannot plan on a map with no FREE cell")
+    occupied = grid.occupied
+    if occupied.any():
+        wall_distance = ndimage.distance_transform_edt(~occupied) * grid.resolution
+    else:
+        wall_distance = np.full(grid.shape, np.inf)
+    wall_distance = np.asarray(wall_distance, dtype=np.float64)
+    cost = np.ones(grid.shape)
+    if config.clearance > 0 and config.clearance_cost > 0:
+        beyond = np.clip((wall_distance - config.blocked_radius) / config.clearance, 0.0, 1.0)
+        cost += config.clearance_cost * (1.0 - beyond) ** 2
+    unknown = grid.unknown
+    if config.unknown == "blocked":
+        cost[unknown] = np.inf
+    else:
+        cost[unknown] *= config.unknown_cost
+    cost[occupied | (wall_distance < config.blocked_radius)] = np.inf
+    return CostGrid(
+        cost=cost, wall_distance=wall_distance, resolution=grid.resolution, origin=grid.origin
+    )
+
+
+def nearest_passable_cell(
+    grid: CostGrid, point: ArrayLike, max_distance: float = math.inf
+) -> tuple[int, int] | None:
+    """The passable cell nearest to a map-frame point (the point's own cell if passable).
+
+    A robot pushed against a wall, or drawn a little inside a wall's inflation by SLAM
+    noise, still needs somewhere to start planning from.
+
+    Parameters
+    ----------
+    grid : CostGrid
+    point : array_like, shape (2,)
+        Map-frame ``(x, y)``, m.
+    max_distance : float
+        Search radius, m.
+
+    Returns
+    -------
+    tuple of int or None
+        ``(row, col)``, or None when no passable cell lies within ``max_distance``.
+    """
+    passable = grid.passable
+    cell = grid.world_to_cell(np.asarray(point, dtype=np.float64)[:2])
+    rows, cols = grid.shape
+    if grid.contains(cell) and passable[cell[0], cell[1]]:
+        return int(cell[0]), int(cell[1])
+    radius = max_distance / grid.resolution if math.isfinite(max_distance) else rows + cols
+    radius_cells = int(min(math.ceil(radius), rows + cols))
+    r0, r1 = max(cell[0] - radius_cells, 0), min(cell[0] + radius_cells + 1, rows)
+    c0, c1 = max(cell[1] - radius_cells, 0), min(cell[1] + radius_cells + 1, cols)
+    if r0 >= r1 or c0 >= c1:
+        return None
+    window = passable[r0:r1, c0:c1]
+    candidates = np.argwhere(window)
+    if len(candidates) == 0:
+        return None
+    offsets = candidates + np.array([r0, c0]) - cell
+    squared = (offsets**2).sum(axis=1)
+    best = int(np.argmin(squared))
+    if squared[best] > radius**2:
+        return None
+    return int(candidates[best, 0] + r0), int(candidates[best, 1] + c0)
+
+
+@numba.njit(cache=True)
+def _heap_push(
+    keys: FloatArray, items: IntArray, size: int, key: float, item: int
+) -> tuple[FloatArray, IntArray, int]:
+    if size == len(keys):
+        keys = np.concatenate((keys, np.empty(len(keys))))
+        items = np.concatenate((items, np.empty(len(items), dtype=np.int64)))
+    position = size
+    while position > 0:
+        up = (position - 1) >> 1
+        if keys[up] <= key:
+            break
+        keys[position] = keys[up]
+        items[position] = items[up]
+        position = up
+    keys[position] = key
+    items[position] = item
+    return keys, items, size + 1
+
+
+@numba.njit(cache=True)
+def _heap_pop(keys: FloatArray, items: IntArray, size: int) -> tuple[float, int, int]:
+    top_key, top_item = keys[0], items[0]
+    size -= 1
+    last_key, last_item = keys[size], items[size]
+    position = 0
+    while True:
+        child = 2 * position + 1
+        if child >= size:
+            break
+        if child + 1 < size and keys[child + 1] < keys[child]:
+            child += 1
+        if keys[child] >= last_key:
+            break
+        keys[position] = keys[child]
+        items[position] = items[child]
+        position = child
+    if size > 0:
+        keys[position] = last_key
+        items[position] = last_item
+    return top_key, top_item, size
+
+
+@numba.njit(cache=True)
+def _dijkstra_kernel(
+    cost: FloatArray,
+    start_row: int,
+    start_col: int,
+    goal_row: int,
+    goal_col: int,
+    resolution: float,
+    neighbour_rows: IntArray,
+    neighbour_cols: IntArray,
+) -> tuple[FloatArray, IntArray]:
+    """Dijkstra over the 8-connected grid with a binary heap and lazy deletion.
+
+    Edge ``a -> b`` costs ``length * (cost[a] + cost[b]) / 2``; a diagonal step needs both
+    orthogonal cells it passes between to be finite. ``goal_row < 0`` searches everything.
+    """
+    rows, cols = cost.shape
+    distance = np.full((rows, cols), np.inf)
+    parent = np.full((rows, cols), -1, dtype=np.int64)
+    done = np.zeros((rows, cols), dtype=np.bool_)
+    capacity = 1024
+    keys = np.empty(capacity)
+    items = np.empty(capacity, dtype=np.int64)
+    size = 0
+    distance[start_row, start_col] = 0.0
+    keys, items, size = _heap_push(keys, items, size, 0.0, start_row * cols + start_col)
+    diagonal = resolution * math.sqrt(2.0)
+    while size > 0:
+        key, item, size = _heap_pop(keys, items, size)
+        row = item // cols
+        col = item - row * cols
+        if done[row, col]:
+            continue
+        done[row, col] = True
+        if row == goal_row and col == goal_col:
+            break
+        here = cost[row, col]
+        for k in range(8):
+            dr = neighbour_rows[k]
+            dc = neighbour_cols[k]
+            r = row + dr
+            c = col + dc
+            if r < 0 or r >= rows or c < 0 or c >= cols or done[r, c]:
+                continue
+            there = cost[r, c]
+            if not math.isfinite(there):
+                continue
+            if k >= 4:
+                if not (math.isfinite(cost[row + dr, col]) and math.isfinite(cost[row, col + dc])):
+                    continue
+                length = diagonal
+            else:
+                length = resolution
+            candidate = key + length * 0.5 * (here + there)
+            if candidate < distance[r, c]:
+                distance[r, c] = candidate
+                parent[r, c] = item
+                keys, items, size = _heap_push(keys, items, size, candidate, r * cols + c)
+    return distance, parent
+
+
+def _start_cell(grid: CostGrid, start: ArrayLike, snap_distance: float) -> tuple[int, int]:
+    start_cell = nearest_passable_cell(grid, start, snap_distance)
+    if start_cell is None:
+        point = np.asarray(start, dtype=np.float64)[:2].tolist()
+        raise ValueError(
+            f"no passable cell within {snap_distance} m of the start {point}: the robot is "
+            "boxed in or off the map"
+        )
+    return start_cell
+
+
+def distance_field(
+    grid: CostGrid, start: ArrayLike, *, snap_distance: float = 0.5
+) -> DistanceField:
+    """Path cost from a start point to every cell (one Dijkstra search).
+
+    Parameters
+    ----------
+    grid : CostGrid
+    start : array_like, shape (2,) or (3,)
+        Map-frame start ``(x, y[, theta])``, m.
+    snap_distance : float
+        If the start cell is blocked, start from the nearest passable cell within this
+        distance, m.
+
+    Returns
+    -------
+    DistanceField
+
+    Raises
+    ------
+    ValueError
+        If no passable cell lies within ``snap_distance`` of the start.
+    """
+    row, col = _start_cell(grid, start, snap_distance)
+    cost, parent = _dijkstra_kernel(
+        grid.cost, row, col, -1, -1, grid.resolution, _NEIGHBOUR_ROWS, _NEIGHBOUR_COLS
+    )
+    return DistanceField(cost=cost, parent=parent, start=(row, col), grid=grid)
+
+
+@numba.njit(cache=True)
+def _trace_kernel(parent: IntArray, goal_row: int, goal_col: int) -> IntArray:
+    rows, cols = parent.shape
+    flat = parent.ravel()
+    item = goal_row * cols + goal_col
+    count = 1
+    while flat[item] >= 0:
+        item = flat[item]
+        count += 1
+        if count > rows * cols:  # a cycle would be a bug; never loop forever
+            return np.empty((0, 2), dtype=np.int64)
+    path = np.empty((count, 2), dtype=np.int64)
+    item = goal_row * cols + goal_col
+    for k in range(count - 1, -1, -1):
+        path[k, 0] = item // cols
+        path[k, 1] = item - (item // cols) * cols
+        item = flat[item]
+    return path
+
+
+def trace_path(parent: IntArray, goal_cell: IntArray, start_cell: tuple[int, int]) -> IntArray:
+    """Follow a search tree's parents from ``goal_cell`` back to ``start_cell``.
+
+    Returns
+    -------
+    ndarray of int64, shape (P, 2)
+        Cells ``(row, col)`` from start to goal; empty (0, 2) when the goal was not
+        reached (or is outside the grid).
+    """
+    rows, cols = parent.shape
+    goal_row, goal_col = int(goal_cell[0]), int(goal_cell[1])
+    if not (0 <= goal_row < rows and 0 <= goal_col < cols):
+        return np.empty((0, 2), dtype=np.int64)
+    if (goal_row, goal_col) != tuple(start_cell) and parent[goal_row, goal_col] < 0:
+        return np.empty((0, 2), dtype=np.int64)
+    path = _trace_kernel(parent, goal_row, goal_col)
+    if len(path) == 0 or tuple(path[0]) != tuple(start_cell):
+        return np.empty((0, 2), dtype=np.int64)
+    return path
+
+
+def plan_path(
+    grid: CostGrid,
+    start: ArrayLike,
+    goal: ArrayLike,
+    *,
+    snap_distance: float = 0.5,
+    shorten: bool = True,
+) -> FloatArray:
+    """A least-cost path between two map-frame points, in metres.
+
+    The search stops as soon as the goal cell is settled. Start and goal snap to the
+    nearest passable cell within ``snap_distance``.
+
+    Parameters
+    ----------
+    grid : CostGrid
+    start, goal : array_like, shape (2,) or (3,)
+        Map-frame points, m.
+    snap_distance : float
+        m.
+    shorten : bool
+        Prune the path by line of sight (:func:`shorten_path`).
+
+    Returns
+    -------
+    ndarray of float64, shape (P, 2)
+        Waypoints (cell centres) from start to goal; empty (0, 2) when the goal is
+        unreachable.
+
+    Raises
+    ------
+    ValueError
+        If the start has no passable cell within ``snap_distance``.
+    """
+    row, col = _start_cell(grid, start, snap_distance)
+    goal_cell = nearest_passable_cell(grid, goal, snap_distance)
+    if goal_cell is None:
+        return np.empty((0, 2))
+    _, parent = _dijkstra_kernel(
+        grid.cost,
+        row,
+        col,
+        goal_cell[0],
+        goal_cell[1],
+        grid.resolution,
+        _NEIGHBOUR_ROWS,
+        _NEIGHBOUR_COLS,
+    )
+    cells = trace_path(parent, np.array(goal_cell), (row, col))
+    if len(cells) == 0:
+        return np.empty((0, 2))
+    if shorten:
+        cells = shorten_path(grid, cells)
+    return grid.cell_to_world(cells)
+
+
+@numba.njit(cache=True)
+def _line_max_cost(cost: FloatArray, r0: int, c0: int, r1: int, c1: int) -> float:
+    """Largest cell cost on the straight segment between two cell centres.
+
+    An exact grid traversal in integer arithmetic: the segment crosses a row boundary at
+    ``t = (i + 1/2) / |dr|`` and a column boundary at ``t = (j + 1/2) / |dc|``; where
+    it passes exactly through a cell corner, both cells beside the corner count too (a
+    closed supercover). Blocked cells give ``inf``.
+    """
+    rows_to_cross = abs(r1 - r0)
+    cols_to_cross = abs(c1 - c0)
+    step_r = 1 if r1 > r0 else -1
+    step_c = 1 if c1 > c0 else -1
+    r, c = r0, c0
+    worst = cost[r, c]
+    i = 0
+    j = 0
+    while i < rows_to_cross or j < cols_to_cross:
+        # Compare the next crossings (i + 1/2) / rows and (j + 1/2) / cols exactly.
+        row_key = (2 * i + 1) * cols_to_cross
+        col_key = (2 * j + 1) * rows_to_cross
+        if j >= cols_to_cross or (i < rows_to_cross and row_key < col_key):
+            r += step_r
+            i += 1
+        elif i >= rows_to_cross or col_key < row_key:
+            c += step_c
+            j += 1
+        else:
+            worst = max(worst, cost[r + step_r, c], cost[r, c + step_c])
+            r += step_r
+            c += step_c
+            i += 1
+            j += 1
+        worst = max(worst, cost[r, c])
+        if not math.isfinite(worst):
+            return worst
+    return worst
+
+
+def line_is_clear(grid: CostGrid, cell_a: ArrayLike, cell_b: ArrayLike) -> bool:
+    """Whether the segment between two cell centres crosses only passable cells."""
+    a = np.asarray(cell_a, dtype=np.int64)
+    b = np.asarray(cell_b, dtype=np.int64)
+    return bool(
+        math.isfinite(_line_max_cost(grid.cost, int(a[0]), int(a[1]), int(b[0]), int(b[1])))
+    )
+
+
+@numba.njit(cache=True)
+def _shorten_kernel(cost: FloatArray, cells: IntArray, tolerance: float) -> IntArray:
+    count = len(cells)
+    keep = np.zeros(count, dtype=np.bool_)
+    keep[0] = True
+    keep[count - 1] = True
+    anchor = 0
+    while anchor < count - 1:
+        best = anchor + 1
+        worst_on_path = cost[cells[anchor, 0], cells[anchor, 1]]
+        for j in range(anchor + 1, count):
+            on_path = cost[cells[j, 0], cells[j, 1]]
+            if on_path > worst_on_path:
+                worst_on_path = on_path
+            line = _line_max_cost(
+                cost, cells[anchor, 0], cells[anchor, 1], cells[j, 0], cells[j, 1]
+            )
+            if line <= worst_on_path * tolerance:
+                best = j
+            else:
+                break
+        keep[best] = True
+        anchor = best
+    return cells[keep]
+
+
+def shorten_path(grid: CostGrid, cells: ArrayLike, *, tolerance: float = 1.05) -> IntArray:
+    """Line-of-sight pruning of a cell path ("string pulling").
+
+    From each kept cell, jump to the farthest later cell of the path reachable in a
+    straight line whose cells are all passable and no costlier than ``tolerance`` times
+    the costliest path cell it replaces: shortcuts never run closer to walls than the
+    original path did.
+
+    Parameters
+    ----------
+    grid : CostGrid
+    cells : array_like of int, shape (P, 2)
+        A connected cell path ``(row, col)``, e.g. from :meth:`DistanceField.path_to`.
+    tolerance : float
+        Allowed cost ratio of a shortcut's worst cell to the replaced path's worst cell.
+
+    Returns
+    -------
+    ndarray of int64, shape (Q, 2)
+        A subsequence of ``cells`` with the same first and last cell (Q <= P).
+    """
+    cells = np.ascontiguousarray(cells, dtype=np.int64).reshape(-1, 2)
+    if len(cells) <= 2:
+        return cells.copy()
+    return _shorten_kernel(grid.cost, cells, float(tolerance))

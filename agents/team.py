@@ -1,0 +1,402 @@
+"""The team coordinator: the paper's four kinds of interaction as a state machine (DESIGN §6).
+
+==========================  ==================================================================
+state                       what the robots do
+==========================  ==================================================================
+``no_interaction``          each explores its own frontiers on its own map
+``hypothesis_generation``   (comm up, relative pose unknown) the maps are exchanged and
+                            merged by virtual robot motion; the ranked hypotheses are kept
+``hypothesis_verification`` both drive to a rendezvous planned for the best untested
+                            hypothesis; the peer sensor accepts or rejects it
+``coordinated_exploration`` the transform is known: refined, the maps fused, both robots
+                            explore the merged map and split the frontiers
+==========================  ==================================================================
+
+The coordinator uses the other robot's data only while the comm link is up: maps, poses
+and sightings are exchanged then; a map received earlier stays usable (it is the robot's
+copy), but is not refreshed while the link is down.
+
+Two robots (``robot_0`` holds the team frame: the merged map is in robot 0's map frame).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agents.explorer import ExplorerConfig, ExplorerPolicy
+from agents.planning import distance_field, inflate
+from agents.rendezvous import (
+    RendezvousConfig,
+    choose_meeting_point,
+    field_on_lattice,
+    judge_sighting,
+    predicted_relative_pose,
+    sighting_pose,
+)
+from mrslam_env.geometry import compose, inverse, transform_points
+from mrslam_env.gridmap import GridMap
+from mrslam_env.merge.fuse import fuse_maps, resample_map
+from mrslam_env.merge.pipeline import MergeConfig, MergeInputError, merge_maps, refine_transform
+
+__all__ = ["Decision", "TeamConfig", "TeamCoordinator", "TeamState"]
+
+FloatArray = NDArray[np.float64]
+
+
+class TeamState(StrEnum):
+    NO_INTERACTION = "no_interaction"
+    HYPOTHESIS_GENERATION = "hypothesis_generation"
+    HYPOTHESIS_VERIFICATION = "hypothesis_verification"
+    COORDINATED_EXPLORATION = "coordinated_exploration"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TeamConfig:
+    """How the team decides."""
+
+    explorer: ExplorerConfig = field(default_factory=ExplorerConfig)
+    merge: MergeConfig = field(default_factory=MergeConfig)
+    rendezvous: RendezvousConfig = field(default_factory=RendezvousConfig)
+    interaction: bool = True
+    """False: the robots never interact (the independent-exploration baseline)."""
+    min_map_area: float = 15.0
+    """Each map must know at least this much (m²) before a merge is tried."""
+    regrow_factor: float = 1.3
+    """After an attempt, the next waits until the maps together know this many times as
+    much as then."""
+    min_acceptance_index: float = 0.85
+    """Hypotheses worth a rendezvous agree at least this well with the maps ..."""
+    max_conflict_fraction: float = 0.02
+    """... and conflict at most this much (looser than an offline merge: the rendezvous
+    decides)."""
+    max_rendezvous: int = 3
+    """Hypotheses verified per attempt, best first."""
+    merged_map_every: int = 20
+    """Steps between refreshes of the merged map while coordinating."""
+    refine_every: int = 400
+    """Steps between re-refinements of the transform on the grown maps (0: never)."""
+
+    def __post_init__(self) -> None:
+        for name in ("min_map_area", "min_acceptance_index"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"TeamConfig.{name} must be >= 0, got {value!r}")
+        if not (math.isfinite(self.regrow_factor) and self.regrow_factor >= 1):
+            raise ValueError(f"TeamConfig.regrow_factor must be >= 1, got {self.regrow_factor!r}")
+        if not 0 <= self.max_conflict_fraction <= 1:
+            raise ValueError(
+                f"TeamConfig.max_conflict_fraction must be in [0, 1], "
+                f"got {self.max_conflict_fraction!r}"
+            )
+        for name in ("max_rendezvous", "merged_map_every"):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and value >= 1):
+                raise ValueError(f"TeamConfig.{name} must be an int >= 1, got {value!r}")
+        if not (isinstance(self.refine_every, int) and self.refine_every >= 0):
+            raise ValueError(
+                f"TeamConfig.refine_every must be an int >= 0, got {self.refine_every!r}"
+            )
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    """One thing the team decided (for the ``events`` log)."""
+
+    step: int
+    text: str
+
+
+@dataclass(slots=True)
+class _Rendezvous:
+    hypothesis: FloatArray
+    index: int
+    meeting_point: FloatArray
+    """In map 0's frame."""
+    goals: list[FloatArray]
+    """Each robot's goal in its own map frame."""
+    started: int
+    arrived_at: int | None = None
+
+
+MapSource = Callable[[int], GridMap]
+
+
+class TeamCoordinator:
+    """Drives two :class:`~agents.explorer.ExplorerPolicy` robots through the four kinds of
+    interaction.
+
+    Parameters
+    ----------
+    config : TeamConfig
+    rng : numpy.random.Generator
+        All randomness (explorers' tie-breaking, merging).
+
+    Use: each step call :meth:`act` with the env observations and a function giving robot
+    i's current own map; read :attr:`state`, :attr:`transform`, :attr:`merged_map`,
+    :attr:`rendezvous_point` and the explorers for recording; :meth:`pop_decisions`
+    returns what was decided since the last call.
+    """
+
+    def __init__(self, config: TeamConfig | None = None, *, rng: np.random.Generator) -> None:
+        self.config = config if config is not None else TeamConfig()
+        self.rng = rng
+        self.explorers = [
+            ExplorerPolicy(np.random.default_rng(rng.integers(2**63)), self.config.explorer)
+            for _ in range(2)
+        ]
+        self.state = TeamState.NO_INTERACTION
+        self.step = 0
+        self.transform: FloatArray | None = None
+        """``map0_from_map1`` once verified (refined), else None."""
+        self.preliminary_transform: FloatArray | None = None
+        """The verified hypothesis before refinement."""
+        self.hypotheses: list[FloatArray] = []
+        self.hypotheses_tested = 0
+        self.step_verified: int | None = None
+        self.merged_map: GridMap | None = None
+        self.rendezvous: _Rendezvous | None = None
+        self._decisions: list[Decision] = []
+        self._peer_map: GridMap | None = None
+        """Robot 1's map as robot 0 last received it (while the link was up)."""
+        self._last_merge_step = -(10**9)
+        self._last_refine_step = 0
+        self._retry_area = 0.0
+        self._last_poses = [np.zeros(3), np.zeros(3)]
+
+    # --- what recording reads -----------------------------------------------------------
+
+    @property
+    def rendezvous_point(self) -> FloatArray | None:
+        """The meeting point in map 0's frame while verifying, else None."""
+        return None if self.rendezvous is None else self.rendezvous.meeting_point.copy()
+
+    def pop_decisions(self) -> list[Decision]:
+        decisions, self._decisions = self._decisions, []
+        return decisions
+
+    def _decide(self, text: str) -> None:
+        self._decisions.append(Decision(self.step, text))
+
+    # --- the step -----------------------------------------------------------------------
+
+    def act(self, observations: list[dict[str, Any]], maps: MapSource) -> list[NDArray[np.float32]]:
+        """Actions for both robots (normalised ``(v, omega)``).
+
+        Parameters
+        ----------
+        observations : list of dict
+            The env observations of robot 0 and robot 1 (``pose``, ``scan``, ``peer``,
+            ``comm``).
+        maps : callable
+            ``maps(i)`` is robot i's current own map (called only when needed).
+        """
+        self.step += 1
+        link = bool(observations[0]["comm"][0]) and bool(observations[1]["comm"][0])
+        self._last_poses = [np.asarray(o["pose"], dtype=np.float64) for o in observations]
+        if self.config.interaction:
+            if self.state is TeamState.NO_INTERACTION and link:
+                self._maybe_generate(maps)
+            if self.state is TeamState.HYPOTHESIS_VERIFICATION:
+                self._verify(observations, maps, link)
+            if self.state is TeamState.COORDINATED_EXPLORATION:
+                self._keep_merged_map(maps, link)
+        if self.state is TeamState.COORDINATED_EXPLORATION and self.merged_map is not None:
+            return self._act_coordinated(observations)
+        return [self.explorers[i].act(observations[i], maps(i)) for i in range(2)]
+
+    # --- 1 -> 2: hypothesis generation ------------------------------------------------------
+
+    def _maybe_generate(self, maps: MapSource) -> None:
+        m0, m1 = maps(0), maps(1)
+        areas = [np.count_nonzero(~m.unknown) * m.resolution**2 for m in (m0, m1)]
+        if min(areas) < self.config.min_map_area or sum(areas) < self._retry_area:
+            return
+        self.state = TeamState.HYPOTHESIS_GENERATION
+        self._decide(
+            f"comm up: maps exchanged ({areas[0]:.0f} m² and {areas[1]:.0f} m²), "
+            "generating hypotheses by virtual robot motion"
+        )
+        self._retry_area = sum(areas) * self.config.regrow_factor
+        try:
+            result = merge_maps(m0, m1, self.config.merge, rng=self.rng)
+        except MergeInputError as error:
+            self._decide(f"no hypotheses: {error}")
+            self.state = TeamState.NO_INTERACTION
+            return
+        self.hypotheses = [
+            h.map1_from_map2
+            for h in result.hypotheses
+            if h.agreement.index >= self.config.min_acceptance_index
+            and h.agreement.conflict_fraction <= self.config.max_conflict_fraction
+        ][: self.config.max_rendezvous]
+        if not self.hypotheses:
+            self._decide("no hypothesis worth a rendezvous; exploring on, retry when maps grow")
+            self.state = TeamState.NO_INTERACTION
+            return
+        self._decide(f"{len(self.hypotheses)} hypotheses to verify by rendezvous")
+        self._start_rendezvous(0, maps)
+
+    # --- 3: hypothesis verification -----------------------------------------------------------
+
+    def _start_rendezvous(self, index: int, maps: MapSource) -> None:
+        while index < len(self.hypotheses):
+            hypothesis = self.hypotheses[index]
+            meeting = self._meeting_point(hypothesis, maps)
+            if meeting is not None:
+                point0, cost = meeting
+                point1 = transform_points(inverse(hypothesis), point0[None, :])[0]
+                self.rendezvous = _Rendezvous(
+                    hypothesis=hypothesis,
+                    index=index,
+                    meeting_point=point0,
+                    goals=[point0, point1],
+                    started=self.step,
+                )
+                for explorer, goal in zip(self.explorers, (point0, point1), strict=True):
+                    explorer.set_goal(goal)
+                self.state = TeamState.HYPOTHESIS_VERIFICATION
+                self.hypotheses_tested += 1
+                x, y, theta = hypothesis
+                self._decide(
+                    f"rendezvous for hypothesis #{index} (x {x:.2f}, y {y:.2f}, "
+                    f"theta {theta:.3f}): meet at ({point0[0]:.2f}, {point0[1]:.2f}) in "
+                    f"robot_0's map, later arrival after ~{cost:.1f} m"
+                )
+                return
+            self._decide(f"hypothesis #{index}: no meeting point reachable by both; skipped")
+            index += 1
+        self._give_up()
+
+    def _meeting_point(
+        self, hypothesis: FloatArray, maps: MapSource
+    ) -> tuple[FloatArray, float] | None:
+        m0, m1 = maps(0), maps(1)
+        planner = self.config.explorer.planner
+        costs = []
+        for i, grid in enumerate((m0, m1)):
+            explorer_pose = self._last_poses[i]
+            try:
+                costs.append(distance_field(inflate(grid, planner), explorer_pose).cost)
+            except ValueError:
+                return None
+        cost1_on_0 = field_on_lattice(costs[1], m1, m0, hypothesis)
+        return choose_meeting_point(costs[0], cost1_on_0, m0)
+
+    def _verify(self, observations: list[dict[str, Any]], maps: MapSource, link: bool) -> None:
+        rendezvous = self.rendezvous
+        assert rendezvous is not None
+        config = self.config.rendezvous
+        poses = [np.asarray(o["pose"], dtype=np.float64) for o in observations]
+        if link:
+            predicted = predicted_relative_pose(poses[0], poses[1], rendezvous.hypothesis)
+            for observer, expected in ((0, predicted), (1, inverse(predicted))):
+                peer = observations[observer]["peer"][0]
+                if peer[0] < 0.5:
+                    continue
+                seen = sighting_pose(peer[1], peer[2], peer[3])
+                sighting = judge_sighting(seen, expected, config)
+                who = f"robot_{observer} sees robot_{1 - observer}"
+                if sighting.matches:
+                    self._accept(rendezvous, maps, who, sighting.position_error)
+                else:
+                    self._reject(
+                        rendezvous,
+                        maps,
+                        f"{who} {sighting.position_error:.2f} m / "
+                        f"{math.degrees(sighting.heading_error):.0f}° from the prediction",
+                    )
+                return
+        arrived = all(e.status in ("arrived", "goal_unreachable") for e in self.explorers)
+        if arrived and rendezvous.arrived_at is None:
+            rendezvous.arrived_at = self.step
+            self._decide("both robots at the rendezvous; waiting for a sighting")
+        if (
+            rendezvous.arrived_at is not None
+            and self.step - rendezvous.arrived_at >= config.wait_steps
+        ):
+            self._reject(rendezvous, maps, "arrived and waited: the other robot was not there")
+        elif self.step - rendezvous.started >= config.timeout_steps:
+            self._reject(rendezvous, maps, "rendezvous timed out")
+
+    def _accept(self, rendezvous: _Rendezvous, maps: MapSource, how: str, error: float) -> None:
+        self.preliminary_transform = rendezvous.hypothesis.copy()
+        self._decide(
+            f"hypothesis #{rendezvous.index} accepted: {how} where predicted ({error:.2f} m)"
+        )
+        m0, m1 = maps(0), maps(1)
+        transform, psi, agreement = refine_transform(
+            m0, m1, rendezvous.hypothesis, self.config.merge, rng=self.rng
+        )
+        self.transform = transform
+        self.step_verified = self.step
+        self._last_refine_step = self.step
+        self._decide(
+            f"refined by random walk: psi {psi:.3f}, acceptance index {agreement.index:.3f}; "
+            "coordinated exploration on the merged map"
+        )
+        self.rendezvous = None
+        for explorer in self.explorers:
+            explorer.clear_goal()
+        self.state = TeamState.COORDINATED_EXPLORATION
+        self._peer_map = m1
+        self._fuse(m0)
+
+    def _reject(self, rendezvous: _Rendezvous, maps: MapSource, why: str) -> None:
+        self._decide(f"hypothesis #{rendezvous.index} rejected: {why}")
+        self.rendezvous = None
+        for explorer in self.explorers:
+            explorer.clear_goal()
+        self._start_rendezvous(rendezvous.index + 1, maps)
+
+    def _give_up(self) -> None:
+        self._decide("all hypotheses rejected: independent exploration until the maps grow")
+        self.hypotheses = []
+        self.rendezvous = None
+        self.state = TeamState.NO_INTERACTION
+
+    # --- 4: coordinated exploration -------------------------------------------------------
+
+    def _keep_merged_map(self, maps: MapSource, link: bool) -> None:
+        assert self.transform is not None
+        refresh = self.step - self._last_merge_step >= self.config.merged_map_every
+        if link and refresh:
+            self._peer_map = maps(1)
+            if (
+                self.config.refine_every
+                and self.step - self._last_refine_step >= self.config.refine_every
+            ):
+                self.transform, _, _ = refine_transform(
+                    maps(0), self._peer_map, self.transform, self.config.merge, rng=self.rng
+                )
+                self._last_refine_step = self.step
+        if refresh:
+            self._fuse(maps(0))
+
+    def _fuse(self, own0: GridMap) -> None:
+        assert self.transform is not None and self._peer_map is not None
+        peer = self._peer_map
+        if not math.isclose(peer.resolution, own0.resolution):
+            peer = resample_map(peer, own0.resolution)
+        self.merged_map = fuse_maps(own0, peer, self.transform)
+        self._last_merge_step = self.step
+
+    def _act_coordinated(self, observations: list[dict[str, Any]]) -> list[NDArray[np.float32]]:
+        assert self.transform is not None and self.merged_map is not None
+        poses0 = [
+            np.asarray(observations[0]["pose"], dtype=np.float64),
+            compose(self.transform, np.asarray(observations[1]["pose"], dtype=np.float64)),
+        ]
+        for i, explorer in enumerate(self.explorers):
+            other = self.explorers[1 - i].target
+            explorer.set_teammate_targets(np.empty((0, 2)) if other is None else other[None, :])
+        return [
+            self.explorers[i].act(observations[i], self.merged_map, pose_in_map=poses0[i])
+            for i in range(2)
+        ]

@@ -1,0 +1,142 @@
+"""The exploration benchmark behind ``mrslam bench explore``.
+
+Per scenario and seed, the end-to-end experiment (:func:`scenarios.runner.run_experiment`)
+runs twice from the same starts: with the team coordinator (merge by virtual robot motion,
+rendezvous verification, coordinated exploration of the merged map) and with the same
+robots exploring independently (no interaction). Reported per scenario:
+
+====================  ===============================================================
+``t90_coordinated``   mean simulated time (s) until the robots' maps together cover 90 %
+                      of the free area, with coordination; a run that never gets there
+                      counts as its time limit (and is counted in ``unfinished``)
+``t90_independent``   the same without interaction
+``speedup``           ``t90_independent / t90_coordinated``
+``verified``          runs with a verified merge / runs
+``wrong_accepted``    verified merges off by more than 0.5 m or 5° (must be 0)
+``max_error``         largest translation (m) and rotation (°) error of a verified merge
+====================  ===============================================================
+
+Coverage is judged against the ground truth (evaluation only); runs stop at 90 %.
+"""
+
+from __future__ import annotations
+
+import statistics
+import tempfile
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from scenarios.runner import RunConfig, run_experiment
+
+__all__ = ["DEFAULT_SCENARIOS", "format_explore_table", "run_explore_benchmark"]
+
+DEFAULT_SCENARIOS = ("office", "warehouse", "maze", "twin_wings", "procedural-0")
+WRONG_TRANSLATION = 0.5
+WRONG_ROTATION_DEG = 5.0
+
+
+def _run(scenario: str, seed: int, max_steps: int, interaction: bool, out: Path) -> dict[str, Any]:
+    config = RunConfig(
+        scenario=scenario,
+        seed=seed,
+        max_steps=max_steps,
+        out=out,
+        name=f"{scenario}-{seed}-{'team' if interaction else 'solo'}",
+        record=False,
+        figure=False,
+        interaction=interaction,
+        target_coverage=0.9,
+        progress=False,
+    )
+    return run_experiment(config)
+
+
+def run_explore_benchmark(
+    scenarios: Sequence[str] = DEFAULT_SCENARIOS,
+    seeds: Sequence[int] = range(5),
+    max_steps: int = 4000,
+    *,
+    progress: Callable[[str], None] | None = None,
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """Run the benchmark; returns (summary rows per scenario, per-run rows)."""
+    runs: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory(prefix="mrslam-bench-explore-") as folder:
+        for scenario in scenarios:
+            for seed in seeds:
+                for interaction in (True, False):
+                    report = _run(scenario, seed, max_steps, interaction, Path(folder))
+                    merge = report["merge"]
+                    limit = max_steps * 0.1
+                    row = {
+                        "scenario": scenario,
+                        "seed": seed,
+                        "interaction": interaction,
+                        "t90": report["t90"],
+                        "t90_or_limit": report["t90"] if report["t90"] is not None else limit,
+                        "verified": merge["verified"],
+                        "translation_error": merge["translation_error"],
+                        "rotation_error": merge["rotation_error"],
+                        "hypotheses_tested": merge["hypotheses_tested"],
+                        "step_verified": merge["step_verified"],
+                        "wall_time": report["wall_time"],
+                    }
+                    runs.append(row)
+                    if progress is not None:
+                        mode = "team" if interaction else "solo"
+                        progress(f"{scenario} seed {seed} {mode}: t90 {report['t90']}")
+    return [_summarise(scenario, runs) for scenario in scenarios], runs
+
+
+def _summarise(scenario: str, runs: list[dict[str, Any]]) -> dict[str, Any]:
+    team = [r for r in runs if r["scenario"] == scenario and r["interaction"]]
+    solo = [r for r in runs if r["scenario"] == scenario and not r["interaction"]]
+    verified = [r for r in team if r["verified"]]
+    wrong = [
+        r
+        for r in verified
+        if r["translation_error"] > WRONG_TRANSLATION or r["rotation_error"] > WRONG_ROTATION_DEG
+    ]
+    t_team = statistics.fmean(r["t90_or_limit"] for r in team)
+    t_solo = statistics.fmean(r["t90_or_limit"] for r in solo)
+    return {
+        "scenario": scenario,
+        "runs": len(team),
+        "t90_coordinated": round(t_team, 1),
+        "t90_independent": round(t_solo, 1),
+        "speedup": round(t_solo / t_team, 3) if t_team > 0 else None,
+        "unfinished_coordinated": sum(r["t90"] is None for r in team),
+        "unfinished_independent": sum(r["t90"] is None for r in solo),
+        "verified": len(verified),
+        "wrong_accepted": len(wrong),
+        "max_translation_error": max((r["translation_error"] for r in verified), default=None),
+        "max_rotation_error": max((r["rotation_error"] for r in verified), default=None),
+        "hypotheses_tested": sum(r["hypotheses_tested"] for r in team),
+    }
+
+
+def format_explore_table(rows: Sequence[dict[str, Any]]) -> str:
+    """The summary as a markdown table."""
+    lines = [
+        "| scenario | t90 coordinated (s) | t90 independent (s) | speed-up | verified | "
+        "wrong accepted | max error (m / °) | hypotheses tested |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+    ]
+    for row in rows:
+        if row["max_translation_error"] is None:
+            error = "-"
+        else:
+            error = f"{row['max_translation_error']:.3f} / {row['max_rotation_error']:.2f}"
+        unfinished = ""
+        if row["unfinished_coordinated"] or row["unfinished_independent"]:
+            unfinished = (
+                f" ({row['unfinished_coordinated']}/{row['unfinished_independent']} "
+                "never reached 90 %)"
+            )
+        lines.append(
+            f"| {row['scenario']}{unfinished} | {row['t90_coordinated']:.1f} | "
+            f"{row['t90_independent']:.1f} | {row['speedup']:.2f}× | "
+            f"{row['verified']}/{row['runs']} | {row['wrong_accepted']} | {error} | "
+            f"{row['hypotheses_tested']} |"
+        )
+    return "\n".join(lines)

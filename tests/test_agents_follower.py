@@ -1,0 +1,214 @@
+"""The path follower (agents.follower), driven in a kinematic unicycle simulation."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from agents.follower import (
+    FollowerConfig,
+    PathFollower,
+    lane_clearance,
+    limit_rates,
+    lookahead_target,
+    pursuit_command,
+)
+
+DT = 0.1
+MAX_SPEED, MAX_TURN = 1.0, 2.0
+ACCELERATION, ANGULAR_ACCELERATION = 2.0, 6.0  # the env's RobotConfig defaults
+
+
+def unicycle_step(
+    pose: np.ndarray, velocity: np.ndarray, action: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The env's robot model, kinematically: commanded (v, omega) reached within the
+    acceleration limits, then one Euler step."""
+    command = np.array([action[0] * MAX_SPEED, action[1] * MAX_TURN])
+    limits = np.array([ACCELERATION, ANGULAR_ACCELERATION]) * DT
+    velocity = velocity + np.clip(command - velocity, -limits, limits)
+    theta = pose[2] + velocity[1] * DT
+    x = pose[0] + velocity[0] * math.cos(theta) * DT
+    y = pose[1] + velocity[0] * math.sin(theta) * DT
+    return np.array([x, y, math.remainder(theta, 2 * math.pi)]), velocity
+
+
+def distance_to_polyline(point: np.ndarray, path: np.ndarray) -> float:
+    best = math.inf
+    for a, b in itertools.pairwise(path):
+        t = np.clip(np.dot(point - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+        best = min(best, float(np.hypot(*(point - (a + t * (b - a))))))
+    return best
+
+
+def drive(
+    follower: PathFollower, path: np.ndarray, start: np.ndarray, steps: int = 500
+) -> tuple[np.ndarray, np.ndarray]:
+    follower.set_path(path)
+    pose, velocity = start.astype(float), np.zeros(2)
+    poses, actions = [pose], []
+    for _ in range(steps):
+        action = follower.step(pose)
+        actions.append(action)
+        pose, velocity = unicycle_step(pose, velocity, action)
+        poses.append(pose)
+        if follower.status == "reached" and np.abs(velocity).max() < 1e-6:
+            break
+    return np.array(poses), np.array(actions)
+
+
+L_PATHS = {
+    "east_then_north": (np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0]]), [0.0, 0.0, 0.0]),
+    "north_then_west": (np.array([[0.0, 0.0], [0.0, 2.5], [-3.0, 2.5]]), [0.0, 0.0, 1.0]),
+    "start_facing_away": (np.array([[0.0, 0.0], [3.0, 0.0], [3.0, -3.0]]), [0.0, 0.0, math.pi]),
+    "short_legs": (np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.8]]), [0.0, 0.0, 0.3]),
+}
+
+
+@pytest.mark.parametrize("name", sorted(L_PATHS))
+def test_reaches_the_goal_of_an_l_shaped_path_without_overshoot(name: str) -> None:
+    path, start = L_PATHS[name]
+    config = FollowerConfig()
+    follower = PathFollower(config)
+    poses, actions = drive(follower, path, np.array(start))
+    assert follower.status == "reached"
+    final = poses[-1, :2]
+    goal = path[-1]
+    assert np.hypot(*(final - goal)) <= config.goal_tolerance + 0.02
+    # No overshoot: the robot never gets past the goal along the last leg.
+    last_leg = (goal - path[-2]) / np.hypot(*(goal - path[-2]))
+    beyond = (poses[:, :2] - goal) @ last_leg
+    assert beyond.max() <= 0.05
+    # It tracks the path (corners cut by at most about the lookahead's sagitta).
+    deviation = max(distance_to_polyline(p, path) for p in poses[:, :2])
+    assert deviation <= 0.25
+    # Actions are normalised and change smoothly (within the acceleration limits).
+    assert np.all(np.abs(actions) <= 1.0)
+    jumps = np.abs(np.diff(actions, axis=0))
+    assert jumps[:, 0].max() <= config.max_linear_acceleration * DT / MAX_SPEED + 1e-6
+    assert jumps[:, 1].max() <= config.max_angular_acceleration * DT / MAX_TURN + 1e-6
+
+
+def test_turns_in_place_when_the_path_starts_behind_the_robot() -> None:
+    follower = PathFollower()
+    follower.set_path(np.array([[0.0, 0.0], [-2.0, 0.0]]))
+    actions = [follower.step(np.array([0.0, 0.0, 0.0])) for _ in range(5)]
+    assert all(a[0] == 0.0 for a in actions)
+    assert abs(actions[-1][1]) > 0.5
+
+
+def test_stuck_detection_backs_up_and_counts_the_event() -> None:
+    config = FollowerConfig(stuck_steps=20, recovery_reverse_steps=5, recovery_turn_steps=5)
+    follower = PathFollower(config)
+    follower.set_path(np.array([[0.0, 0.0], [3.0, 0.0]]))
+    pinned = np.array([0.0, 0.0, 0.0])  # a robot that cannot move (against a wall)
+    actions = [follower.step(pinned) for _ in range(22)]
+    assert follower.stuck_events == 1
+    assert follower.status == "recovering"
+    backing = [follower.step(pinned) for _ in range(4)]
+    assert all(a[0] < 0 for a in backing)
+    assert all(a[0] >= 0 for a in actions[:20])
+    for _ in range(10):
+        follower.step(pinned)
+    assert follower.status == "following"
+
+
+def test_a_new_path_does_not_reset_stuck_detection() -> None:
+    config = FollowerConfig(stuck_steps=20)
+    follower = PathFollower(config)
+    pinned = np.array([0.0, 0.0, 0.0])
+    for step in range(25):
+        if step % 10 == 0:  # the caller replans every 10 steps
+            follower.set_path(np.array([[0.0, 0.0], [3.0, 0.0]]))
+        follower.step(pinned)
+    assert follower.stuck_events == 1
+
+
+def test_the_clearance_guard_stops_forward_motion_but_allows_turning() -> None:
+    follower = PathFollower()
+    follower.set_path(np.array([[0.0, 0.0], [3.0, 0.5]]))
+    for _ in range(10):
+        action = follower.step(np.array([0.0, 0.0, 0.0]), clearance=(0.05, np.inf))
+    assert action[0] == 0.0
+    assert action[1] > 0.0
+
+
+def test_lookahead_target_moves_forward_along_the_path() -> None:
+    path = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]])
+    target, progress = lookahead_target(path, [0.5, 0.1], 0.0, 0.5)
+    assert progress == pytest.approx(0.5)
+    np.testing.assert_allclose(target, [1.0, 0.0])
+    _, progress = lookahead_target(path, [1.8, 0.05], progress, 0.5)
+    assert progress == pytest.approx(1.8)
+    target, progress = lookahead_target(path, [2.1, 0.3], progress, 0.5)
+    assert progress == pytest.approx(2.3)
+    np.testing.assert_allclose(target, [2.0, 0.8])
+    # Progress never goes back, even if the robot does.
+    _, again = lookahead_target(path, [0.0, 0.0], progress, 0.5)
+    assert again == pytest.approx(progress)
+    # Past the end the target is the end.
+    target, progress = lookahead_target(path, [2.0, 2.5], progress, 0.5)
+    np.testing.assert_allclose(target, [2.0, 2.0])
+    assert progress == pytest.approx(4.0)
+
+
+def test_lookahead_does_not_jump_to_a_later_part_of_a_path_that_doubles_back() -> None:
+    # A hairpin: the return leg passes 0.3 m from the start of the outbound leg.
+    path = np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 0.3], [0.0, 0.3]])
+    _, progress = lookahead_target(path, [0.2, 0.25], 0.0, 0.5)
+    assert progress < 1.0
+
+
+def test_pursuit_command_goes_straight_turns_and_slows_near_the_goal() -> None:
+    config = FollowerConfig()
+    v, omega = pursuit_command([0.0, 0.0, 0.0], [1.0, 0.0], 5.0, config)
+    assert v == pytest.approx(config.cruise_speed) and omega == pytest.approx(0.0)
+    v, omega = pursuit_command([0.0, 0.0, 0.0], [0.5, 0.3], 5.0, config)
+    assert 0 < v < config.cruise_speed and omega > 0
+    v_near, _ = pursuit_command([0.0, 0.0, 0.0], [0.2, 0.0], 0.05, config)
+    assert v_near < 0.5 * config.cruise_speed
+    v, omega = pursuit_command([0.0, 0.0, 0.0], [-1.0, -0.1], 5.0, config)
+    assert v == 0.0 and omega < 0
+
+
+def test_limit_rates_clamps_the_change_per_step() -> None:
+    config = FollowerConfig(max_linear_acceleration=1.0, max_angular_acceleration=2.0, dt=0.1)
+    assert limit_rates((0.0, 0.0), (1.0, -1.0), config) == pytest.approx((0.1, -0.2))
+    assert limit_rates((0.5, 0.5), (0.55, 0.45), config) == pytest.approx((0.55, 0.45))
+
+
+def test_lane_clearance_measures_gaps_from_the_footprint() -> None:
+    angles = -np.pi + np.arange(360) * (2 * np.pi / 360)
+    scan = np.full(360, 8.0)
+    ahead = np.argmin(np.abs(angles))
+    behind = 0  # -pi
+    scan[ahead] = 1.0
+    scan[behind] = 0.5
+    scan[np.argmin(np.abs(angles - np.pi / 2))] = 0.3  # beside the robot: not in the lane
+    front, rear = lane_clearance(scan, angles, robot_radius=0.2)
+    assert front == pytest.approx(0.8)
+    assert rear == pytest.approx(0.3)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("lookahead", 0.0),
+        ("cruise_speed", 2.0),
+        ("turn_in_place_angle", 4.0),
+        ("stuck_steps", 0),
+        ("stop_distance", -1.0),
+        ("recovery_speed", 5.0),
+    ],
+)
+def test_config_rejects_bad_values_naming_the_field(field: str, value: object) -> None:
+    with pytest.raises(ValueError, match=field):
+        FollowerConfig(**{field: value})  # type: ignore[arg-type]
+
+
+def test_a_non_finite_path_is_rejected() -> None:
+    with pytest.raises(ValueError, match="non-finite"):
+        PathFollower().set_path(np.array([[0.0, 0.0], [np.nan, 1.0]]))

@@ -1,0 +1,89 @@
+"""The team coordinator in the real env: rendezvous accepts a true hypothesis and rejects
+a wrong one; without interaction nothing is merged."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agents.team import TeamConfig, TeamCoordinator, TeamState
+from mrslam_env.config import EnvConfig
+from mrslam_env.env import MultiRobotSlamEnv
+from mrslam_env.geometry import compose, inverse
+from scenarios.runner import _MapCache
+
+# Both robots in the office corridor (y 7..9), 5 m apart, facing each other: in comm
+# range, in each other's sight once they move.
+STARTS = ((4.0, 8.0, 0.0), (9.0, 8.3, np.pi))
+TRUE_TRANSFORM = compose(inverse(np.array(STARTS[0])), np.array(STARTS[1]))
+
+
+def verify(hypothesis: np.ndarray, steps: int = 600) -> tuple[TeamCoordinator, list[str]]:
+    """Map a little, then put ``hypothesis`` to a rendezvous; run until it is settled."""
+    env = MultiRobotSlamEnv(scenario="office", seed=0, config=EnvConfig(starts=STARTS))
+    observations, _ = env.reset()
+    agents = env.possible_agents
+    maps = _MapCache(env)
+    team = TeamCoordinator(TeamConfig(interaction=True), rng=np.random.default_rng(0))
+    # The hypothesis under test is injected as if the merge had proposed it.
+    team.hypotheses = [hypothesis]
+    team._last_poses = [observations[a]["pose"] for a in agents]
+    team._retry_area = np.inf  # no new merge attempt during the test
+    team._start_rendezvous(0, maps)
+    assert team.state is TeamState.HYPOTHESIS_VERIFICATION
+    decisions: list[str] = []
+    for _ in range(steps):
+        actions = team.act([observations[a] for a in agents], maps)
+        observations, _, _, _, _ = env.step({a: actions[i] for i, a in enumerate(agents)})
+        decisions += [d.text for d in team.pop_decisions()]
+        if team.state is not TeamState.HYPOTHESIS_VERIFICATION:
+            break
+    return team, decisions
+
+
+def test_a_true_hypothesis_is_accepted_at_the_rendezvous_and_refined() -> None:
+    estimate = compose(TRUE_TRANSFORM, [0.08, -0.05, 0.02])  # a merge's small error
+    team, decisions = verify(estimate)
+    assert team.state is TeamState.COORDINATED_EXPLORATION, decisions
+    assert any("accepted" in text for text in decisions)
+    assert team.transform is not None and team.merged_map is not None
+    error = compose(inverse(TRUE_TRANSFORM), team.transform)
+    assert np.hypot(error[0], error[1]) < 0.1 and abs(error[2]) < np.radians(1.0)
+    assert team.hypotheses_tested == 1 and team.step_verified is not None
+
+
+@pytest.mark.parametrize(
+    "wrong",
+    [[1.5, 0.0, 0.0], [0.0, 0.0, np.pi / 2]],
+    ids=["shifted-1.5m", "turned-90deg"],
+)
+def test_a_wrong_hypothesis_is_rejected_at_the_rendezvous(wrong: list[float]) -> None:
+    team, decisions = verify(compose(TRUE_TRANSFORM, wrong))
+    assert team.state is TeamState.NO_INTERACTION, decisions
+    assert team.transform is None and team.merged_map is None
+    assert any("rejected" in text for text in decisions), decisions
+    assert any("all hypotheses rejected" in text for text in decisions)
+
+
+def test_without_interaction_the_robots_only_explore() -> None:
+    env = MultiRobotSlamEnv(scenario="office", seed=0, config=EnvConfig(starts=STARTS))
+    observations, _ = env.reset()
+    agents = env.possible_agents
+    maps = _MapCache(env)
+    team = TeamCoordinator(TeamConfig(interaction=False), rng=np.random.default_rng(0))
+    link_steps = 0
+    for _ in range(200):
+        actions = team.act([observations[a] for a in agents], maps)
+        observations, _, _, _, infos = env.step({a: actions[i] for i, a in enumerate(agents)})
+        link_steps += int(observations["robot_0"]["comm"][0])
+        assert team.state is TeamState.NO_INTERACTION
+    assert link_steps > 50, "the link was up: the robots could have talked"
+    assert team.hypotheses_tested == 0 and not team.pop_decisions()
+    assert all(infos[a]["observed_area"] > 20.0 for a in agents), "both explored"
+
+
+def test_bad_team_config_is_refused() -> None:
+    with pytest.raises(ValueError, match="regrow_factor"):
+        TeamConfig(regrow_factor=0.5)
+    with pytest.raises(ValueError, match="max_rendezvous"):
+        TeamConfig(max_rendezvous=0)
