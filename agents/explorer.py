@@ -23,13 +23,14 @@ near a taken one are discounted so that two robots do not explore the same place
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from agents.follower import FollowerConfig, PathFollower, lane_clearance
+from agents.follower import FollowerConfig, PathFollower, escape_command, lane_clearance
 from agents.frontiers import FrontierConfig, Frontiers, extract_frontiers
 from agents.planning import (
     CostGrid,
@@ -40,7 +41,7 @@ from agents.planning import (
     shorten_path,
 )
 from mrslam_env.geometry import world_to_cell
-from mrslam_env.gridmap import GridMap
+from mrslam_env.gridmap import OCCUPIED, GridMap
 
 __all__ = [
     "ExplorerConfig",
@@ -293,6 +294,19 @@ def _disk_offsets(radius_cells: float) -> IntArray:
     return np.stack([rows[inside], cols[inside]], axis=1).astype(np.int64)
 
 
+ESCAPE_AFTER_STEPS = 25
+"""Steps without real motion (< 5 cm, < 0.3 rad) while following a path before the
+reactive escape."""
+CLOSE_RETURN_RANGE = 0.5
+"""Scan returns closer than this (m) are remembered as obstacles for planning."""
+CLOSE_RETURN_EVERY = 5
+"""Steps between remembered scans."""
+CLOSE_RETURN_MEMORY = 600
+"""Steps a remembered return is kept."""
+ESCAPE_STEPS = 20
+"""Steps of reactive escape before replanning."""
+
+
 class ExplorerPolicy:
     """Frontier exploration for one robot: ``act(observation, robot_map) -> (v, omega)``.
 
@@ -337,6 +351,10 @@ class ExplorerPolicy:
         self._empty_replans = 0
         self._stuck_seen = 0
         self._angles: FloatArray | None = None
+        self._held_steps = 0
+        self._escape_until = 0
+        self._still_pose = np.zeros(3)
+        self._close_returns: deque[tuple[int, FloatArray]] = deque()
         self._grid_origin: tuple[float, float] = (0.0, 0.0)
         self._grid_resolution = 1.0
 
@@ -420,16 +438,70 @@ class ExplorerPolicy:
         pose = np.asarray(
             observation["pose"] if pose_in_map is None else pose_in_map, dtype=np.float64
         )[:3]
+        self._remember_close_returns(observation.get("scan"), pose)
         reason = self._replan_reason(robot_map, pose)
         if reason:
-            self._replan(robot_map, pose, reason)
+            self._replan(self._with_close_returns(robot_map), pose, reason)
         if self.status in ("done", "blocked", "goal_unreachable", "idle"):
             self.follower.clear()
-        clearance = self._clearance(observation.get("scan"))
+        scan = observation.get("scan")
+        clearance = self._clearance(scan)
+        if scan is not None and (self.status == "blocked" or self._step < self._escape_until):
+            # No passable cell near the robot, or the scan keeps stopping it where the map
+            # shows no wall: the planner cannot help; get out reactively, then replan.
+            assert self._angles is not None
+            if self._step + 1 == self._escape_until:
+                self._last_replan_step = -(10**9)
+            return escape_command(scan, self._angles, self.config.planner.robot_radius)
         action = self.follower.step(pose, clearance=clearance)
+        moved = float(np.hypot(*(pose[:2] - self._still_pose[:2])))
+        turned = abs(math.remainder(float(pose[2] - self._still_pose[2]), 2 * math.pi))
+        if self.follower.status == "following" and moved < 0.05 and turned < 0.3:
+            self._held_steps += 1
+            if self._held_steps >= ESCAPE_AFTER_STEPS:
+                self._held_steps = 0
+                self._escape_until = self._step + ESCAPE_STEPS
+                if self._target is not None and self._given_goal is None:
+                    self._blacklist_point(self._target, self.config.blacklist_steps * 5)
+                    self._blacklist_point(pose, self.config.blacklist_steps * 5)
+        else:
+            self._held_steps = 0
+            self._still_pose = pose.copy()
         if self._given_goal is not None and self.follower.status == "reached":
             self.status = "arrived"
         return action
+
+    def _remember_close_returns(self, scan: Any, pose: FloatArray) -> None:
+        """Keep the scan's close returns (map frame) for a while: obstacles the map
+        misses (a desk corner seen only edge-on) that stop the robot must also stop the
+        planner from sending it there again, as a costmap's obstacle layer does."""
+        if scan is None or self._step % CLOSE_RETURN_EVERY:
+            return
+        ranges = np.asarray(scan, dtype=np.float64)
+        if self._angles is None or len(self._angles) != len(ranges):
+            self._clearance(ranges)
+        assert self._angles is not None
+        close = ranges < CLOSE_RETURN_RANGE
+        if not close.any():
+            return
+        angles = pose[2] + self._angles[close]
+        points = pose[:2] + ranges[close, None] * np.column_stack([np.cos(angles), np.sin(angles)])
+        self._close_returns.append((self._step, points))
+        horizon = self._step - CLOSE_RETURN_MEMORY
+        while self._close_returns and self._close_returns[0][0] < horizon:
+            self._close_returns.popleft()
+
+    def _with_close_returns(self, grid: GridMap) -> GridMap:
+        if not self._close_returns:
+            return grid
+        points = np.concatenate([p for _, p in self._close_returns])
+        cells = grid.world_to_cell(points)
+        cells = cells[grid.contains(cells)]
+        if len(cells) == 0:
+            return grid
+        marked = grid.cells.copy()
+        marked[cells[:, 0], cells[:, 1]] = OCCUPIED
+        return GridMap(cells=marked, resolution=grid.resolution, origin=grid.origin)
 
     def _clearance(self, scan: Any) -> tuple[float, float] | None:
         if scan is None:
@@ -450,11 +522,18 @@ class ExplorerPolicy:
             self._stuck_seen = self.follower.stuck_events
             if self._target is not None and self._given_goal is None:
                 self._blacklist_point(self._target)
+                # Where the robot got stuck is a trap (a gap the planner's margin calls
+                # passable in places, a desk corner): no frontier there for long.
+                self._blacklist_point(pose, config.blacklist_steps * 5)
             return "stuck"
         if self.follower.status == "recovering":
             return ""
         if self.status in ("done", "blocked", "goal_unreachable"):
-            return "retry" if since >= config.replan_interval else ""
+            # Blocked: retry soon (the escape manoeuvre is moving the robot out).
+            wait = (
+                config.min_replan_interval if self.status == "blocked" else config.replan_interval
+            )
+            return "retry" if since >= wait else ""
         if self._given_goal is not None:
             if self.status == "arrived":
                 return ""
@@ -518,10 +597,9 @@ class ExplorerPolicy:
         still = free & near_unknown
         return bool(still.sum() < self.config.target_gone_fraction * len(self._target_cells))
 
-    def _blacklist_point(self, point: FloatArray) -> None:
-        self._blacklist.append(
-            (float(point[0]), float(point[1]), self._step + self.config.blacklist_steps)
-        )
+    def _blacklist_point(self, point: FloatArray, steps: int | None = None) -> None:
+        duration = self.config.blacklist_steps if steps is None else steps
+        self._blacklist.append((float(point[0]), float(point[1]), self._step + duration))
 
     # --- replanning ------------------------------------------------------------------------
 

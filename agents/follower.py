@@ -31,6 +31,7 @@ __all__ = [
     "FollowerConfig",
     "FollowerStatus",
     "PathFollower",
+    "escape_command",
     "lane_clearance",
     "limit_rates",
     "lookahead_target",
@@ -276,6 +277,34 @@ def lane_clearance(
     front = float(np.min(x[ahead] - edge[ahead], initial=np.inf))
     rear = float(np.min(-x[behind] - edge[behind], initial=np.inf))
     return front, rear
+
+
+def escape_command(
+    scan: ArrayLike, angles: ArrayLike, robot_radius: float, *, step_deg: float = 10.0
+) -> NDArray[np.float32]:
+    """A reactive way out when the planner cannot help (no passable cell near the robot,
+    or the scan keeps stopping it where the map shows no wall, e.g. at a desk corner seen
+    only edge-on): turn towards the heading whose lane (the strip the footprint sweeps)
+    is clearest, and creep forward once facing it with room ahead.
+
+    Returns the normalised ``(v, omega)`` (float32, (2,)).
+    """
+    ranges = np.asarray(scan, dtype=np.float64)
+    beam_angles = np.asarray(angles, dtype=np.float64)
+    candidates = np.radians(np.arange(-180.0, 180.0, step_deg))
+    clear = np.array(
+        [
+            min(lane_clearance(ranges, beam_angles - heading, robot_radius)[0], 2.0)
+            for heading in candidates
+        ]
+    )
+    # The clearest lane; among nearly as clear ones, the smallest turn.
+    good = clear >= clear.max() - 0.05
+    direction = float(candidates[good][np.argmin(np.abs(candidates[good]))])
+    front = float(clear[np.argmin(np.abs(candidates))])
+    turn = float(np.clip(direction / (math.pi / 4), -1.0, 1.0))
+    forward = 0.25 if abs(direction) <= math.radians(step_deg) and front > 0.15 else 0.0
+    return np.array([forward, turn], dtype=np.float32)
 
 
 class PathFollower:

@@ -45,7 +45,7 @@ class RendezvousConfig:
     merged, the hypothesis' own error and the peer sensor's noise all fit inside."""
     heading_tolerance: float = math.radians(20.0)
     """... and its heading within this (rad)."""
-    wait_steps: int = 60
+    wait_steps: int = 40
     """After both robots arrived, wait this many steps for a sighting before rejecting."""
     timeout_steps: int = 900
     """Give up on a rendezvous (reject) after this many steps in all."""

@@ -43,7 +43,13 @@ from agents.rendezvous import (
 from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import GridMap
 from mrslam_env.merge.fuse import fuse_maps, resample_map
-from mrslam_env.merge.pipeline import MergeConfig, MergeInputError, merge_maps, refine_transform
+from mrslam_env.merge.pipeline import (
+    MergeConfig,
+    MergeInputError,
+    merge_maps,
+    refine_transform,
+    same_answer,
+)
 
 __all__ = ["Decision", "TeamConfig", "TeamCoordinator", "TeamState"]
 
@@ -71,30 +77,26 @@ class TeamConfig:
     regrow_factor: float = 1.3
     """After an attempt, the next waits until the maps together know this many times as
     much as then."""
-    min_acceptance_index: float = 0.85
-    """Hypotheses worth a rendezvous agree at least this well with the maps ..."""
-    max_conflict_fraction: float = 0.02
-    """... and conflict at most this much (looser than an offline merge: the rendezvous
-    decides)."""
     max_rendezvous: int = 3
-    """Hypotheses verified per attempt, best first."""
+    """Hypotheses verified per attempt, best first. Only hypotheses the merge found
+    consistent with both maps (``ScoredHypothesis.confident``: acceptance index, no
+    conflicts, enough overlap) are worth the drive; several of them is exactly the
+    ambiguity (repeated rooms, mirrored wings) that only a rendezvous can settle."""
+    max_meeting_cost: float = 25.0
+    """Skip a hypothesis whose meeting point is further than this (m of weighted path)
+    for the later robot: the detour would cost more exploration than the merge saves."""
     merged_map_every: int = 20
     """Steps between refreshes of the merged map while coordinating."""
     refine_every: int = 400
     """Steps between re-refinements of the transform on the grown maps (0: never)."""
 
     def __post_init__(self) -> None:
-        for name in ("min_map_area", "min_acceptance_index"):
+        for name in ("min_map_area", "max_meeting_cost"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"TeamConfig.{name} must be >= 0, got {value!r}")
         if not (math.isfinite(self.regrow_factor) and self.regrow_factor >= 1):
             raise ValueError(f"TeamConfig.regrow_factor must be >= 1, got {self.regrow_factor!r}")
-        if not 0 <= self.max_conflict_fraction <= 1:
-            raise ValueError(
-                f"TeamConfig.max_conflict_fraction must be in [0, 1], "
-                f"got {self.max_conflict_fraction!r}"
-            )
         for name in ("max_rendezvous", "merged_map_every"):
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= 1):
@@ -158,6 +160,9 @@ class TeamCoordinator:
         self.preliminary_transform: FloatArray | None = None
         """The verified hypothesis before refinement."""
         self.hypotheses: list[FloatArray] = []
+        self.rejected: list[FloatArray] = []
+        """Hypotheses a rendezvous rejected: the maps' frames never move, so they stay
+        wrong and are not tried again."""
         self.hypotheses_tested = 0
         self.step_verified: int | None = None
         self.merged_map: GridMap | None = None
@@ -230,12 +235,17 @@ class TeamCoordinator:
             self._decide(f"no hypotheses: {error}")
             self.state = TeamState.NO_INTERACTION
             return
-        self.hypotheses = [
+        pivot = m1.cell_to_world(np.argwhere(~m1.unknown).mean(axis=0)[None, :])[0]
+        fresh = [
             h.map1_from_map2
             for h in result.hypotheses
-            if h.agreement.index >= self.config.min_acceptance_index
-            and h.agreement.conflict_fraction <= self.config.max_conflict_fraction
-        ][: self.config.max_rendezvous]
+            if h.confident
+            and not any(
+                same_answer(h.map1_from_map2, rejected, pivot, self.config.merge)
+                for rejected in self.rejected
+            )
+        ]
+        self.hypotheses = fresh[: self.config.max_rendezvous]
         if not self.hypotheses:
             self._decide("no hypothesis worth a rendezvous; exploring on, retry when maps grow")
             self.state = TeamState.NO_INTERACTION
@@ -249,7 +259,12 @@ class TeamCoordinator:
         while index < len(self.hypotheses):
             hypothesis = self.hypotheses[index]
             meeting = self._meeting_point(hypothesis, maps)
-            if meeting is not None:
+            if meeting is not None and meeting[1] > self.config.max_meeting_cost:
+                self._decide(
+                    f"hypothesis #{index}: the meeting point is {meeting[1]:.0f} m away; "
+                    "skipped for now"
+                )
+            elif meeting is not None:
                 point0, cost = meeting
                 point1 = transform_points(inverse(hypothesis), point0[None, :])[0]
                 self.rendezvous = _Rendezvous(
@@ -270,7 +285,8 @@ class TeamCoordinator:
                     f"robot_0's map, later arrival after ~{cost:.1f} m"
                 )
                 return
-            self._decide(f"hypothesis #{index}: no meeting point reachable by both; skipped")
+            else:
+                self._decide(f"hypothesis #{index}: no meeting point reachable by both; skipped")
             index += 1
         self._give_up()
 
@@ -350,6 +366,7 @@ class TeamCoordinator:
 
     def _reject(self, rendezvous: _Rendezvous, maps: MapSource, why: str) -> None:
         self._decide(f"hypothesis #{rendezvous.index} rejected: {why}")
+        self.rejected.append(rendezvous.hypothesis)
         self.rendezvous = None
         for explorer in self.explorers:
             explorer.clear_goal()

@@ -92,6 +92,7 @@ __all__ = [
     "cell_agreement",
     "classify_outcome",
     "format_merge_table",
+    "format_scenario_breakdown",
     "generate_pairs",
     "load_or_generate_pairs",
     "load_pairs",
@@ -1151,6 +1152,28 @@ def format_merge_table(
             lines.append(f"| {label} | " + " | ".join(cell(summary[n]) for n in names) + " |")
     for name, reason in (skipped or {}).items():
         lines.append(f"\nskipped {name}: {reason}")
+    return "\n".join(lines)
+
+
+def format_scenario_breakdown(rows: Sequence[dict[str, Any]], method: str = "ours") -> str:
+    """Outcomes of one method per world (procedural layouts together), as a markdown
+    table: where it succeeds, and where it refuses because the maps are ambiguous."""
+    counts: dict[str, dict[str, int]] = {}
+    for row in rows:
+        if row["method"] != method:
+            continue
+        world = "procedural" if row["scenario"].startswith("procedural") else row["scenario"]
+        tally = counts.setdefault(world, {})
+        tally[row["outcome"]] = tally.get(row["outcome"], 0) + 1
+    outcomes = ("success", "refused", "wrong", "correct_refusal")
+    lines = [
+        f"| {method}: world | " + " | ".join(o.replace("_", " ") for o in outcomes) + " |",
+        "| --- |" + " ---: |" * len(outcomes),
+    ]
+    for world in sorted(counts):
+        lines.append(
+            f"| {world} | " + " | ".join(str(counts[world].get(o, 0)) for o in outcomes) + " |"
+        )
     return "\n".join(lines)
 
 

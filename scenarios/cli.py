@@ -96,6 +96,7 @@ def _build_parser() -> argparse.ArgumentParser:
     explore.add_argument("--scenarios", nargs="*", help="scenario names (default: built-in five)")
     explore.add_argument("--seeds", type=int, default=5, help="seeds 0..N-1 (default 5)")
     explore.add_argument("--max-steps", type=int, default=4000, help="per run (default 4000)")
+    explore.add_argument("--jobs", type=int, default=1, help="runs at a time (default 1)")
     explore.add_argument("--json", action="store_true")
     merge = kinds.add_parser(
         "merge", help="map merging: success, wrong answers, refusals and time per method"
@@ -269,12 +270,13 @@ def _cmd_bench_explore(args: argparse.Namespace) -> int:
         run_explore_benchmark,
     )
 
-    if args.seeds < 1 or args.max_steps < 1:
-        raise ValueError("--seeds and --max-steps must be >= 1")
+    if args.seeds < 1 or args.max_steps < 1 or args.jobs < 1:
+        raise ValueError("--seeds, --max-steps and --jobs must be >= 1")
     rows, runs = run_explore_benchmark(
         args.scenarios or DEFAULT_SCENARIOS,
         range(args.seeds),
         args.max_steps,
+        jobs=args.jobs,
         progress=None if args.json else lambda text: print(text, file=sys.stderr),
     )
     if args.json:
@@ -288,6 +290,7 @@ def _cmd_bench_merge(args: argparse.Namespace) -> int:
     from scenarios.bench_merge import (
         PairGenerationConfig,
         format_merge_table,
+        format_scenario_breakdown,
         load_or_generate_pairs,
         resolve_methods,
         run_merge_benchmark,
@@ -326,6 +329,9 @@ def _cmd_bench_merge(args: argparse.Namespace) -> int:
             f"generated in {manifest['generation_seconds']:.0f} s"
         )
         print(format_merge_table(summary, skipped))
+        if "ours" in methods:
+            print()
+            print(format_scenario_breakdown(rows))
     return 0
 
 

@@ -201,6 +201,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
         recorder.log_event(
             f"run {name}: world {world.name}, {len(agents)} robots, seed {config.seed}"
         )
+        recorder.log_text("team/state", str(team.state))
     squared_errors = np.array(
         [
             _squared_error(world_from_maps[i], observations[a]["pose"], infos[a]["true_pose"])
@@ -231,6 +232,8 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                 recorder.set_time(steps, steps * env_config.dt)
                 for decision in team.pop_decisions():
                     recorder.log_event(decision.text)
+                    if "rendezvous" in decision.text or "hypothesis #" in decision.text:
+                        recorder.log_text("rendezvous/status", decision.text)
                 if team.state is not state:
                     recorder.log_text("team/state", str(team.state))
                 _record_step(recorder, env, team, maps, observations, infos, config, logged_scans)
@@ -390,17 +393,15 @@ def _record_step(
                 recorder.log_line(f"{agent}/plan", points, robot=i)
             else:
                 recorder.log_points(f"{agent}/frontiers", points, robot=i)
-    if due:
-        point = team.rendezvous_point
-        recorder.log_points(
-            "rendezvous/meeting_point", np.empty((0, 2)) if point is None else point
-        )
-        if team.rendezvous is not None:
-            recorder.log_text("rendezvous/status", f"verifying hypothesis #{team.rendezvous.index}")
-            for i in range(2):
-                plan = team.explorers[i].plan
-                if i == 1 and len(plan):
-                    plan = transform_points(team.rendezvous.hypothesis, plan)
-                recorder.log_line(f"rendezvous/plan_{i}", plan, robot=i)
-        if coordinated and team.merged_map is not None:
-            recorder.log_grid("team/merged_map", team.merged_map)
+    # A rendezvous can be settled within a few steps: log it every step while it lasts.
+    if team.rendezvous is not None:
+        recorder.log_points("rendezvous/meeting_point", team.rendezvous.meeting_point)
+        for i in range(2):
+            plan = team.explorers[i].plan
+            if i == 1 and len(plan):
+                plan = transform_points(team.rendezvous.hypothesis, plan)
+            recorder.log_line(f"rendezvous/plan_{i}", plan, robot=i)
+    elif due:
+        recorder.log_points("rendezvous/meeting_point", np.empty((0, 2)))
+    if due and coordinated and team.merged_map is not None:
+        recorder.log_grid("team/merged_map", team.merged_map)

@@ -190,3 +190,29 @@ def test_one_explorer_maps_the_office() -> None:
     assert coverage >= 0.85
     assert collisions <= 5
     assert len(policy.frontiers) > 0 and len(policy.plan) > 0
+
+
+def test_close_scan_returns_the_map_misses_are_planned_around() -> None:
+    # An open room; the scan shows a post 0.5 m ahead of the robot that the map lacks.
+    cells = np.full((80, 80), FREE, dtype=np.int8)
+    cells[[0, -1], :] = OCCUPIED
+    cells[:, [0, -1]] = OCCUPIED
+    grid = GridMap(cells=cells, resolution=0.1)
+    pose = np.array([2.0, 4.0, 0.0])
+    angles = -np.pi + np.arange(360) * (2 * np.pi / 360)
+    scan = np.full(360, 8.0)
+    scan[np.abs(angles) < np.radians(12)] = 0.45
+    policy = ExplorerPolicy(np.random.default_rng(0))
+    policy.set_goal([6.0, 4.0])
+    policy.act({"pose": pose}, grid)  # no scan: straight through
+    assert np.abs(policy.plan[:, 1] - 4.0).max() < 0.05
+    for _ in range(6):
+        policy.act({"pose": pose, "scan": scan}, grid)
+    policy.set_goal([6.0, 4.0])  # replan with the remembered returns
+    policy.act({"pose": pose, "scan": scan}, grid)
+    post = np.array([2.45, 4.0])
+    samples = np.concatenate(
+        [np.linspace(a, b, 20) for a, b in zip(policy.plan[:-1], policy.plan[1:], strict=True)]
+    )
+    assert np.hypot(*(samples - post).T).min() > 0.25, "the path keeps clear of the post"
+    np.testing.assert_allclose(policy.plan[-1], [6.0, 4.0], atol=0.1)

@@ -212,3 +212,19 @@ def test_config_rejects_bad_values_naming_the_field(field: str, value: object) -
 def test_a_non_finite_path_is_rejected() -> None:
     with pytest.raises(ValueError, match="non-finite"):
         PathFollower().set_path(np.array([[0.0, 0.0], [np.nan, 1.0]]))
+
+
+def test_escape_turns_to_the_clearest_lane_and_creeps_out() -> None:
+    from agents.follower import escape_command
+
+    angles = -np.pi + np.arange(360) * (2 * np.pi / 360)
+    # A wall 0.3 m ahead and on the left; open (8 m) to the right and behind.
+    x, y = np.cos(angles), np.sin(angles)
+    ranges = np.full(360, 8.0)
+    ranges[(x > 0.3) | (y > 0.3)] = 0.3
+    v, omega = escape_command(ranges, angles, 0.2)
+    assert v == 0.0 and omega < -0.5, "turns right, on the spot"
+    # Facing an open lane (a wall only behind): drive slowly, no turn.
+    open_ahead = np.where(x < -0.5, 0.3, 8.0)
+    v, omega = escape_command(open_ahead, angles, 0.2)
+    assert v > 0.0 and abs(omega) < 0.3

@@ -380,3 +380,18 @@ def test_random_walk_baseline_returns_only_accepted_transforms() -> None:
             assert agreement.overlap_fraction >= config.min_overlap_fraction
     empty = GridMap(cells=np.full((20, 20), UNKNOWN, dtype=np.int8), resolution=0.05)
     assert bench_merge.method_random_walk(m1, empty, np.random.default_rng(0)) is None
+
+
+def test_scenario_breakdown_counts_outcomes_per_world() -> None:
+    from scenarios.bench_merge import format_scenario_breakdown
+
+    rows = [
+        {"method": "ours", "scenario": "maze", "outcome": "success"},
+        {"method": "ours", "scenario": "procedural-1", "outcome": "refused"},
+        {"method": "ours", "scenario": "procedural-2", "outcome": "success"},
+        {"method": "features", "scenario": "maze", "outcome": "wrong"},
+    ]
+    table = format_scenario_breakdown(rows).splitlines()
+    assert table[2] == "| maze | 1 | 0 | 0 | 0 |"
+    assert table[3] == "| procedural | 1 | 1 | 0 | 0 |"
+    assert len(table) == 4

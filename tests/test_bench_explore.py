@@ -1,0 +1,41 @@
+"""``mrslam bench explore``: the summary and its table, on a tiny run."""
+
+from __future__ import annotations
+
+from scenarios.bench_explore import _summarise, format_explore_table, run_explore_benchmark
+
+
+def test_a_tiny_benchmark_pairs_coordinated_and_independent_runs() -> None:
+    rows, runs = run_explore_benchmark(["maze"], [1], max_steps=120)
+    assert [(r["scenario"], r["seed"], r["interaction"]) for r in runs] == [
+        ("maze", 1, True),
+        ("maze", 1, False),
+    ]
+    (row,) = rows
+    assert row["runs"] == 1 and row["wrong_accepted"] == 0
+    # 12 s is too short for 90 %: both runs count their time limit.
+    assert row["t90_coordinated"] == row["t90_independent"] == 12.0
+    assert row["unfinished_coordinated"] == row["unfinished_independent"] == 1
+    table = format_explore_table(rows).splitlines()
+    assert table[0].startswith("| scenario | t90 coordinated (s)")
+    assert table[2].startswith("| maze (1/1 never reached 90 %) | 12.0 | 12.0 | 1.00× | 0/1 |")
+
+
+def test_summary_counts_wrong_merges_and_speed_up() -> None:
+    def run(interaction: bool, t90: float, verified: bool = False, error: float = 0.0):
+        return {
+            "scenario": "s",
+            "interaction": interaction,
+            "t90": t90,
+            "t90_or_limit": t90,
+            "verified": verified,
+            "translation_error": error if verified else None,
+            "rotation_error": 0.1 if verified else None,
+            "hypotheses_tested": 1,
+        }
+
+    runs = [run(True, 50.0, True, 0.05), run(True, 70.0, True, 0.8), run(False, 90.0)]
+    row = _summarise("s", runs)
+    assert row["t90_coordinated"] == 60.0 and row["t90_independent"] == 90.0
+    assert row["speedup"] == 1.5 and row["verified"] == 2 and row["wrong_accepted"] == 1
+    assert row["max_translation_error"] == 0.8
