@@ -49,6 +49,7 @@ local_map   Box(0, 1, (2, S, S),   egocentric crop of the robot's own map, centr
 
 ``pose`` and ``local_map`` exist when onboard SLAM is on (``config.slam``, the default).
 Each robot runs :class:`~mrslam_env.slam.slam.RobotSlam` on its own ``odom`` and ``scan``
+(minus the returns from robots its peer sensor detects: they are not part of the map)
 (mode ``slam``, ``odometry`` or ``ground_truth`` per ``config.slam.mode``);
 ``env.unwrapped.robot_map(agent)`` returns its current map (a
 :class:`~mrslam_env.gridmap.GridMap` in its map frame) and ``robot_slam(agent)`` the SLAM
@@ -114,6 +115,7 @@ from mrslam_env.sim.simulator import SimState, Simulator
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
 from mrslam_env.slam.local_map import local_map
 from mrslam_env.slam.raycast import mark_scan_observed
+from mrslam_env.slam.scan import mask_returns_near
 from mrslam_env.slam.slam import RobotSlam
 from mrslam_env.worlds import build_world
 
@@ -121,6 +123,9 @@ __all__ = ["MultiRobotSlamEnv", "env", "parallel_env"]
 
 AgentID = str
 ObsDict = dict[str, NDArray[Any]]
+
+PEER_MASK_MARGIN = 0.15
+"""Beyond the robot radius (m): covers the peer sensor's noise."""
 
 ROBOT_COLOURS = [(31, 119, 180), (214, 39, 40), (44, 160, 44), (148, 103, 189), (255, 127, 14)]
 
@@ -310,10 +315,24 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
             true_pose_in_map = None
             if ground_truth:
                 true_pose_in_map = compose(inverse(self._sim.starts[i]), state.true_poses[i])
-            slam.update(state.odometry[i], state.scans[i], true_pose_in_map)
+            slam.update(state.odometry[i], self._scan_without_peers(state, i), true_pose_in_map)
             area[i] = (grid.known_cells - known_before) * grid.resolution**2
             self._observed_area[i] = grid.known_cells * grid.resolution**2
         return area
+
+    def _scan_without_peers(self, state: SimState, robot: int) -> NDArray[np.float64]:
+        """The scan SLAM integrates: returns from the robots the peer sensor detects are
+        dropped (a robot is not part of the static map, and touching robots would pull
+        the scan match). The ``scan`` observation itself is left whole."""
+        peers = state.peers[robot]
+        seen = peers[:, 0] > 0.5
+        if not seen.any():
+            return state.scans[robot]
+        points = peers[seen, 1:2] * np.column_stack(
+            [np.cos(peers[seen, 2]), np.sin(peers[seen, 2])]
+        )
+        radius = self.config.robot.radius + PEER_MASK_MARGIN
+        return mask_returns_near(state.scans[robot], points, radius, self.config.lidar.max_range)
 
     def _observations(self, state: SimState) -> dict[AgentID, ObsDict]:
         observations: dict[AgentID, ObsDict] = {}

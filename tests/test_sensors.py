@@ -67,6 +67,21 @@ def test_backward_motion_has_small_rotations() -> None:
     np.testing.assert_allclose(increments[:, 2], turn / 2, atol=1e-9)
 
 
+def test_turning_on_the_spot_with_contact_jitter_stays_a_turn() -> None:
+    # A robot turning in place while touching another shifts by fractions of a millimetre;
+    # its odometry must still read as a turn, with noise to match (not tenths of metres).
+    rng = np.random.default_rng(1)
+    before = np.zeros((500, 3))
+    jitter = rng.normal(0.0, 3e-4, (500, 2))
+    after = np.column_stack([jitter, np.full(500, 0.2)])
+    increments = odometry_increments(before, after)
+    assert np.abs(increments[:, 0]).max() > 1.0, "the jitter alone sets rot1"
+    noisy = sample_odometry_increments(increments, OdometryConfig(), rng)
+    moved = apply_odometry_increments(before, noisy)
+    assert np.abs(moved[:, :2]).max() < 0.06  # the model: sqrt(alpha4) * turn, 4 sigma
+    assert np.abs(moved[:, 2] - 0.2).max() < 0.25  # sqrt(alpha1) * turn, 5.5 sigma
+
+
 @pytest.mark.parametrize("kind", ["forward", "backward", "rotation", "any"])
 def test_increments_and_apply_are_exact_inverses(kind: str) -> None:
     rng = np.random.default_rng(1)

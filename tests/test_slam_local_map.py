@@ -63,3 +63,17 @@ def test_crop_matches_the_slow_reference(seed: int) -> None:
 def test_bad_crop_sizes_are_refused(cells: int, cell_size: float) -> None:
     with pytest.raises(ValueError, match=r"cells must be|cell_size must be"):
         local_map(OccupancyGrid(), [0.0, 0.0, 0.0], cells, cell_size)
+
+
+def test_returns_from_a_detected_robot_are_dropped_for_slam() -> None:
+    from mrslam_env.slam.scan import mask_returns_near
+
+    ranges = np.full(360, 8.0)
+    ranges[170:191] = 1.0  # beams straight ahead (beam 180) hit something 1 m away
+    ranges[0:10] = 2.0  # and a wall behind
+    masked = mask_returns_near(ranges, np.array([[1.1, 0.0]]), 0.35, 8.0)
+    assert np.isnan(masked[170:191]).all(), "the robot 1.1 m ahead is not mapped"
+    np.testing.assert_array_equal(masked[0:10], 2.0)
+    np.testing.assert_array_equal(masked[20:170], 8.0)  # no-return beams stay
+    assert not np.isnan(ranges).any(), "the input is not modified"
+    np.testing.assert_array_equal(mask_returns_near(ranges, np.empty((0, 2)), 0.35, 8.0), ranges)

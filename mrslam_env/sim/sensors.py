@@ -26,6 +26,10 @@ __all__ = [
 ]
 
 
+MIN_TRAVEL = 0.01
+"""Below this travel (m per step) a motion counts as a turn on the spot for the noise."""
+
+
 def odometry_increments(before: FloatArray, after: FloatArray) -> FloatArray:
     """Decompose motions between poses (n, 3) into ``(rot1, trans, rot2)`` (n, 3).
 
@@ -53,6 +57,12 @@ def sample_odometry_increments(
     (Probabilistic Robotics, table 5.6)."""
     rot1, trans, rot2 = increments[:, 0], increments[:, 1], increments[:, 2]
     a1, a2, a3, a4 = config.alpha1, config.alpha2, config.alpha3, config.alpha4
+    # A turn on the spot has no direction of travel: a sub-millimetre shift (contact
+    # jitter) gives an arbitrary rot1 of up to 90 degrees, and the model's noise would
+    # then throw the robot tens of centimetres. Below MIN_TRAVEL the rotation counts as
+    # one turn (rot1 -> 0) for the noise; the increments themselves stay exact.
+    weight = np.minimum(np.abs(trans) / MIN_TRAVEL, 1.0)
+    rot1, rot2 = weight * rot1, rot2 + (1.0 - weight) * rot1
     std = np.sqrt(
         np.column_stack(
             [

@@ -14,7 +14,13 @@ from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["NORMAL_HALF_WIDTH", "NORMAL_MAX_GAP", "scan_normals", "scan_points"]
+__all__ = [
+    "NORMAL_HALF_WIDTH",
+    "NORMAL_MAX_GAP",
+    "mask_returns_near",
+    "scan_normals",
+    "scan_points",
+]
 
 NORMAL_HALF_WIDTH = 2
 """Neighbours either side (beams) that :func:`scan_normals` fits a line through."""
@@ -118,3 +124,26 @@ def scan_normals(
         normals[i, 0] = nx / norm
         normals[i, 1] = ny / norm
     return normals
+
+
+def mask_returns_near(
+    ranges: FloatArray, points: FloatArray, radius: float, max_range: float
+) -> FloatArray:
+    """A copy of ``ranges`` with the returns that end within ``radius`` (m) of any of
+    ``points`` (K, 2), sensor frame, set to NaN (skipped by mapping and matching).
+
+    SLAM maps a static world: another robot is not part of it. Where the peer sensor
+    says a robot stands, its returns would put a phantom wall into the map and, when the
+    robots touch, pull the scan match; they are dropped before SLAM sees the scan.
+    """
+    out = np.array(ranges, dtype=np.float64)
+    peers = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    if len(peers) == 0:
+        return out
+    n = len(out)
+    angles = -np.pi + np.arange(n) * (2.0 * np.pi / n)
+    returned = out < max_range
+    ends = out[:, None] * np.column_stack([np.cos(angles), np.sin(angles)])
+    distance = np.linalg.norm(ends[:, None, :] - peers[None, :, :], axis=2).min(axis=1)
+    out[returned & (distance <= radius)] = np.nan
+    return out
