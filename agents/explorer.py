@@ -304,6 +304,13 @@ CLOSE_RETURN_EVERY = 5
 CLOSE_RETURN_MEMORY = 600
 """Steps a remembered return is kept."""
 ESCAPE_STEPS = 20
+ROUTE_HYSTERESIS = 1.0
+"""A routine replan to the same goal switches route only if the new one is this much
+shorter (m)."""
+NO_PROGRESS_DISTANCE = 0.3
+"""Getting this much closer (m) to the goal counts as progress ..."""
+NO_PROGRESS_STEPS = 150
+"""... and without it for this many steps the goal is given up and the robot replans."""
 """Steps of reactive escape before replanning."""
 
 
@@ -355,6 +362,8 @@ class ExplorerPolicy:
         self._escape_until = 0
         self._still_pose = np.zeros(3)
         self._close_returns: deque[tuple[int, FloatArray]] = deque()
+        self._best_distance = math.inf
+        self._best_step = 0
         self._grid_origin: tuple[float, float] = (0.0, 0.0)
         self._grid_resolution = 1.0
 
@@ -391,7 +400,7 @@ class ExplorerPolicy:
         if goal.shape != (2,) or not np.all(np.isfinite(goal)):
             raise ValueError(f"set_goal needs a finite (x, y), got {point!r}")
         self._given_goal = goal.copy()
-        self._target = goal.copy()
+        self._set_target(goal)
         self._target_cells = np.empty((0, 2))
         self.follower.clear()
         self.status = "to_goal"
@@ -528,6 +537,17 @@ class ExplorerPolicy:
             return "stuck"
         if self.follower.status == "recovering":
             return ""
+        if self._target is not None and self.status in ("exploring", "to_goal"):
+            # A watchdog on the goal itself: orbiting a path point (pure pursuit that
+            # cannot make the turn) moves the robot but never brings it closer.
+            distance = float(np.hypot(*(pose[:2] - self._target[:2])))
+            if distance < self._best_distance - NO_PROGRESS_DISTANCE:
+                self._best_distance, self._best_step = distance, self._step
+            elif self._step - self._best_step > NO_PROGRESS_STEPS:
+                self._best_distance, self._best_step = math.inf, self._step
+                if self._given_goal is None:
+                    self._blacklist_point(self._target)
+                return "no_progress"
         if self.status in ("done", "blocked", "goal_unreachable"):
             # Blocked: retry soon (the escape manoeuvre is moving the robot out).
             wait = (
@@ -597,6 +617,12 @@ class ExplorerPolicy:
         still = free & near_unknown
         return bool(still.sum() < self.config.target_gone_fraction * len(self._target_cells))
 
+    def _set_target(self, point: FloatArray) -> None:
+        """A new goal restarts the progress watchdog; keeping the same one does not."""
+        if self._target is None or np.hypot(*(point[:2] - self._target[:2])) > 0.5:
+            self._best_distance, self._best_step = math.inf, self._step
+        self._target = np.asarray(point, dtype=np.float64).copy()
+
     def _blacklist_point(self, point: FloatArray, steps: int | None = None) -> None:
         duration = self.config.blacklist_steps if steps is None else steps
         self._blacklist.append((float(point[0]), float(point[1]), self._step + duration))
@@ -621,8 +647,16 @@ class ExplorerPolicy:
         else:
             self._plan_to_frontier(grid, cost_grid, distances)
 
-    def _follow(self, cost_grid: CostGrid, cells: IntArray) -> None:
-        self.follower.set_path(cost_grid.cell_to_world(shorten_path(cost_grid, cells)))
+    def _follow(self, cost_grid: CostGrid, cells: IntArray, same_goal: bool = False) -> None:
+        path = cost_grid.cell_to_world(shorten_path(cost_grid, cells))
+        if same_goal and self.last_replan_reason == "periodic" and len(self.follower.path):
+            # Hysteresis: a routine replan to the same goal keeps the current route unless
+            # the new one is clearly shorter; otherwise two routes of about equal length
+            # around a loop make the robot turn back and forth for ever.
+            length = float(np.hypot(*np.diff(path, axis=0).T).sum()) if len(path) > 1 else 0.0
+            if length > self.follower.remaining - ROUTE_HYSTERESIS:
+                return
+        self.follower.set_path(path)
 
     def _plan_to_given_goal(self, cost_grid: CostGrid, distances: DistanceField) -> None:
         assert self._given_goal is not None
@@ -651,9 +685,11 @@ class ExplorerPolicy:
             self.status = "done" if self._empty_replans >= config.done_after else "exploring"
             return
         self._empty_replans = 0
-        self._target = frontiers.goals[choice].copy()
+        goal = frontiers.goals[choice]
+        same_goal = self._target is not None and bool(np.hypot(*(goal - self._target[:2])) < 0.3)
+        self._set_target(goal)
         self._target_cells = grid.cell_to_world(frontiers.cells_of(choice))
-        self._follow(cost_grid, distances.path_to(frontiers.goal_cells[choice]))
+        self._follow(cost_grid, distances.path_to(frontiers.goal_cells[choice]), same_goal)
         self.status = "exploring"
 
     def _current_frontier(self, frontiers: Frontiers) -> int:
