@@ -129,6 +129,10 @@ class _Rendezvous:
 
 MapSource = Callable[[int], GridMap]
 
+IN_SIGHT_RANGE = 4.0
+"""A hypothesis that puts the robots closer than this (m, inside the 5 m peer sensor's
+range with a margin) is verified where they stand, without a rendezvous drive."""
+
 
 class TeamCoordinator:
     """Drives two :class:`~agents.explorer.ExplorerPolicy` robots through the four kinds of
@@ -174,6 +178,8 @@ class TeamCoordinator:
         self._last_refine_step = 0
         self._retry_area = 0.0
         self._last_poses = [np.zeros(3), np.zeros(3)]
+        self._last_observations: list[dict[str, Any]] = []
+        self._link = False
 
     # --- what recording reads -----------------------------------------------------------
 
@@ -205,6 +211,8 @@ class TeamCoordinator:
         self.step += 1
         link = bool(observations[0]["comm"][0]) and bool(observations[1]["comm"][0])
         self._last_poses = [np.asarray(o["pose"], dtype=np.float64) for o in observations]
+        self._last_observations = observations
+        self._link = link
         if self.config.interaction:
             if self.state is TeamState.NO_INTERACTION and link:
                 self._maybe_generate(maps)
@@ -258,6 +266,26 @@ class TeamCoordinator:
     def _start_rendezvous(self, index: int, maps: MapSource) -> None:
         while index < len(self.hypotheses):
             hypothesis = self.hypotheses[index]
+            verdict = self._verify_in_place(hypothesis, maps(0))
+            if verdict is not None:
+                self.hypotheses_tested += 1
+                rendezvous = _Rendezvous(
+                    hypothesis=hypothesis,
+                    index=index,
+                    meeting_point=self._last_poses[0][:2].copy(),
+                    goals=[],
+                    started=self.step,
+                )
+                if verdict:
+                    self._accept(rendezvous, maps, "robot_0 sees robot_1 from here", 0.0)
+                    return
+                self._decide(
+                    f"hypothesis #{index} rejected where the robots stand: it puts robot_1 "
+                    "in plain sight of robot_0, and robot_0 does not see it"
+                )
+                self.rejected.append(hypothesis)
+                index += 1
+                continue
             meeting = self._meeting_point(hypothesis, maps)
             if meeting is not None and meeting[1] > self.config.max_meeting_cost:
                 self._decide(
@@ -289,6 +317,32 @@ class TeamCoordinator:
                 self._decide(f"hypothesis #{index}: no meeting point reachable by both; skipped")
             index += 1
         self._give_up()
+
+    def _verify_in_place(self, hypothesis: FloatArray, map0: GridMap) -> bool | None:
+        """A rendezvous of length zero: if the hypothesis puts robot 1 well within the peer
+        sensor's range of robot 0, across space robot 0's map knows to be free, the sensor
+        settles it where they stand (True: seen where predicted; False: not seen). None
+        when the robots have to meet first."""
+        if not (self._link and self._last_observations):
+            return None  # robot 1's pose is only known over the link
+        predicted = predicted_relative_pose(self._last_poses[0], self._last_poses[1], hypothesis)
+        distance = float(np.hypot(predicted[0], predicted[1]))
+        if not 0.5 < distance < IN_SIGHT_RANGE:
+            return None
+        peer = self._last_observations[0]["peer"][0]
+        if peer[0] > 0.5:
+            seen = sighting_pose(peer[1], peer[2], peer[3])
+            return judge_sighting(seen, predicted, self.config.rendezvous).matches
+        # Not seen: only a rejection if the line of sight is known free in robot 0's map.
+        start = self._last_poses[0][:2]
+        end = transform_points(self._last_poses[0], predicted[None, :2])[0]
+        samples = start + np.linspace(0.0, 1.0, 50)[:, None] * (end - start)
+        cells = map0.world_to_cell(samples)
+        if not map0.contains(cells).all():
+            return None
+        if not map0.free[cells[:, 0], cells[:, 1]].all():
+            return None
+        return False
 
     def _meeting_point(
         self, hypothesis: FloatArray, maps: MapSource

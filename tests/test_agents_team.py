@@ -87,3 +87,28 @@ def test_bad_team_config_is_refused() -> None:
         TeamConfig(regrow_factor=0.5)
     with pytest.raises(ValueError, match="max_rendezvous"):
         TeamConfig(max_rendezvous=0)
+
+
+def test_a_hypothesis_that_puts_the_robots_in_sight_is_settled_where_they_stand() -> None:
+    # 3 m apart in the corridor, facing each other: the peer sensor already sees.
+    starts = ((5.0, 8.0, 0.0), (8.0, 8.2, np.pi))
+    truth = compose(inverse(np.array(starts[0])), np.array(starts[1]))
+    for hypothesis, accepted in ((truth, True), (compose(truth, [0.0, 1.5, 0.0]), False)):
+        env = MultiRobotSlamEnv(scenario="office", seed=0, config=EnvConfig(starts=starts))
+        observations, _ = env.reset()
+        agents = env.possible_agents
+        maps = _MapCache(env)
+        team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0))
+        team._retry_area = np.inf  # no merge of its own: the hypothesis is injected
+        team.act([observations[a] for a in agents], maps)  # sees the link and the poses
+        team.pop_decisions()
+        team.hypotheses = [hypothesis]
+        team._start_rendezvous(0, maps)
+        decisions = [d.text for d in team.pop_decisions()]
+        assert team.hypotheses_tested == 1
+        if accepted:
+            assert team.state is TeamState.COORDINATED_EXPLORATION, decisions
+        else:
+            assert team.state is TeamState.NO_INTERACTION, decisions
+            assert any("rejected where the robots stand" in d for d in decisions), decisions
+        assert team.rendezvous is None, "no drive to a meeting point was needed"
