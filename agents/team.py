@@ -121,8 +121,6 @@ class _Rendezvous:
     index: int
     meeting_point: FloatArray
     """In map 0's frame."""
-    goals: list[FloatArray]
-    """Each robot's goal in its own map frame."""
     started: int
     arrived_at: int | None = None
 
@@ -273,7 +271,6 @@ class TeamCoordinator:
                     hypothesis=hypothesis,
                     index=index,
                     meeting_point=self._last_poses[0][:2].copy(),
-                    goals=[],
                     started=self.step,
                 )
                 if verdict:
@@ -299,7 +296,6 @@ class TeamCoordinator:
                     hypothesis=hypothesis,
                     index=index,
                     meeting_point=point0,
-                    goals=[point0, point1],
                     started=self.step,
                 )
                 for explorer, goal in zip(self.explorers, (point0, point1), strict=True):

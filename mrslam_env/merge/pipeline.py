@@ -22,7 +22,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from mrslam_env.geometry import inverse, wrap_scalar
+from mrslam_env.geometry import compose, inverse, transform_points, wrap_scalar
 from mrslam_env.gridmap import GridMap
 from mrslam_env.merge.dissimilarity import (
     Agreement,
@@ -338,11 +338,8 @@ def _at_resolution(grid: GridMap, resolution: float) -> GridMap:
 def same_answer(a: FloatArray, b: FloatArray, pivot: FloatArray, config: MergeConfig) -> bool:
     """Whether two transforms are one answer: they put ``pivot`` (a point of m2, its
     frame) within ``distinct_translation`` and turn within ``distinct_rotation``."""
-    ca, sa = math.cos(a[2]), math.sin(a[2])
-    cb, sb = math.cos(b[2]), math.sin(b[2])
-    pa = (a[0] + ca * pivot[0] - sa * pivot[1], a[1] + sa * pivot[0] + ca * pivot[1])
-    pb = (b[0] + cb * pivot[0] - sb * pivot[1], b[1] + sb * pivot[0] + cb * pivot[1])
-    moved = math.hypot(pa[0] - pb[0], pa[1] - pb[1])
+    point = np.asarray(pivot, dtype=np.float64)[None, :]
+    moved = float(np.hypot(*(transform_points(a, point)[0] - transform_points(b, point)[0])))
     turned = abs(wrap_scalar(float(a[2] - b[2])))
     return moved < config.distinct_translation and turned < config.distinct_rotation
 
@@ -566,25 +563,11 @@ def merge_maps(
             )
 
     tick = time.perf_counter()
-    fine = min(m1.resolution, m2.resolution)
-    f1, f2 = _at_resolution(m1, fine), _at_resolution(m2, fine)
     transform = best.map1_from_map2
-    psi = float(best.psi)
     agreement = best.agreement
+    fine = min(m1.resolution, m2.resolution)
     if fine < resolution * (1.0 - 1e-9):
-        fd1, fd2 = distance_maps(f1), distance_maps(f2)
-        walk = refine_random_walk(
-            f1,
-            f2,
-            transform,
-            config=config.final_random_walk,
-            rng=rng,
-            distances1=fd1,
-            distances2=fd2,
-        )
-        transform = np.asarray(walk.transform, dtype=np.float64)
-        psi = float(walk.psi)
-        agreement = acceptance_index(f1, f2, transform, distances1=fd1, distances2=fd2)
+        transform, psi, agreement = _refine_at_input_resolution(m1, m2, transform, config, rng)
     else:
         psi = float(dissimilarity(w1, w2, transform, distances1=d1, distances2=d2))
     seconds["final_refine"] = time.perf_counter() - tick
@@ -637,13 +620,24 @@ def refine_transform(
     resolution = _working_resolution(m1, m2, config)
     w1, w2 = _at_resolution(m1, resolution), _at_resolution(m2, resolution)
     walk = refine_random_walk(w1, w2, map1_from_map2, config=config.random_walk, rng=rng)
+    return _refine_at_input_resolution(m1, m2, walk.transform, config, rng)
+
+
+def _refine_at_input_resolution(
+    m1: GridMap,
+    m2: GridMap,
+    map1_from_map2: FloatArray,
+    config: MergeConfig,
+    rng: np.random.Generator,
+) -> tuple[FloatArray, float, Agreement]:
+    """The last random walk, at the finer input resolution: transform, psi, agreement."""
     fine = min(m1.resolution, m2.resolution)
     f1, f2 = _at_resolution(m1, fine), _at_resolution(m2, fine)
     d1, d2 = distance_maps(f1), distance_maps(f2)
     final = refine_random_walk(
         f1,
         f2,
-        walk.transform,
+        map1_from_map2,
         config=config.final_random_walk,
         rng=rng,
         distances1=d1,
@@ -660,8 +654,6 @@ def relative_transform_error(
     """Translation error (m) and absolute rotation error (rad) of ``estimate`` against
     ``truth`` (both ``map1_from_map2``): the translation of ``inverse(truth) ∘ estimate``
     measured at ``pivot`` (a point of m2; default its frame's origin)."""
-    from mrslam_env.geometry import compose, transform_points
-
     error = compose(inverse(truth), estimate)
     point = np.zeros(2) if pivot is None else np.asarray(pivot, dtype=np.float64)
     moved = transform_points(error, point[None, :])[0] - point
