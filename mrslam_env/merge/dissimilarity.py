@@ -63,6 +63,7 @@ __all__ = [
     "check_transform",
     "dissimilarity",
     "distance_maps",
+    "largest_conflict",
 ]
 
 RESOLUTION_RTOL = 1e-6
@@ -476,26 +477,13 @@ def acceptance_index(
     d1 = _checked_distances(m1, distances1, "distances1")
     d2 = _checked_distances(m2, distances2, "distances2")
 
-    cells1 = np.argwhere(d1.known)
-    cells2 = m2.world_to_cell(transform_points(inverse(transform), m1.cell_to_world(cells1)))
-    inside = m2.contains(cells2)
-    cells1, cells2 = cells1[inside], cells2[inside]
-    values2 = m2.cells[cells2[:, 0], cells2[:, 1]]
-    known_in_2 = d2.known[cells2[:, 0], cells2[:, 1]]
-    cells1, cells2, values2 = cells1[known_in_2], cells2[known_in_2], values2[known_in_2]
-    values1 = m1.cells[cells1[:, 0], cells1[:, 1]]
-
+    _, values1, values2, conflict = _overlap_and_conflicts(
+        m1, m2, transform, d1, d2, tolerance_cells
+    )
     overlap = len(values1)
     agree = int(np.count_nonzero(values1 == values2))
     disagree = overlap - agree
-    wall1_on_floor2 = (values1 == OCCUPIED) & (values2 == FREE)
-    wall2_on_floor1 = (values1 == FREE) & (values2 == OCCUPIED)
-    far_from_wall2 = d2.occupied[cells2[:, 0], cells2[:, 1]] > tolerance_cells
-    far_from_wall1 = d1.occupied[cells1[:, 0], cells1[:, 1]] > tolerance_cells
-    conflicts = int(
-        np.count_nonzero(wall1_on_floor2 & far_from_wall2)
-        + np.count_nonzero(wall2_on_floor1 & far_from_wall1)
-    )
+    conflicts = int(np.count_nonzero(conflict))
     known1 = int(np.count_nonzero(d1.known))
     known2 = int(np.count_nonzero(d2.known))
     return Agreement(
@@ -509,3 +497,84 @@ def acceptance_index(
         overlap_fraction=overlap / min(known1, known2),
         conflict_fraction=conflicts / overlap if overlap else 0.0,
     )
+
+
+def _overlap_and_conflicts(
+    m1: GridMap,
+    m2: GridMap,
+    transform: NDArray[np.float64],
+    d1: DistanceMaps,
+    d2: DistanceMaps,
+    tolerance_cells: int,
+) -> tuple[NDArray[np.int64], NDArray[np.int8], NDArray[np.int8], NDArray[np.bool_]]:
+    """m1's known cells that land on known cells of m2 (``(K, 2)`` ``(iy, ix)``), both
+    maps' values there, and which of them are conflicts (see :class:`Agreement`)."""
+    cells1 = np.argwhere(d1.known)
+    cells2 = m2.world_to_cell(transform_points(inverse(transform), m1.cell_to_world(cells1)))
+    inside = m2.contains(cells2)
+    cells1, cells2 = cells1[inside], cells2[inside]
+    known_in_2 = d2.known[cells2[:, 0], cells2[:, 1]]
+    cells1, cells2 = cells1[known_in_2], cells2[known_in_2]
+    values1 = m1.cells[cells1[:, 0], cells1[:, 1]]
+    values2 = m2.cells[cells2[:, 0], cells2[:, 1]]
+    wall1_on_floor2 = (values1 == OCCUPIED) & (values2 == FREE)
+    wall2_on_floor1 = (values1 == FREE) & (values2 == OCCUPIED)
+    far_from_wall2 = d2.occupied[cells2[:, 0], cells2[:, 1]] > tolerance_cells
+    far_from_wall1 = d1.occupied[cells1[:, 0], cells1[:, 1]] > tolerance_cells
+    conflict = (wall1_on_floor2 & far_from_wall2) | (wall2_on_floor1 & far_from_wall1)
+    return cells1, values1, values2, conflict
+
+
+def largest_conflict(
+    m1: GridMap,
+    m2: GridMap,
+    map1_from_map2: ArrayLike,
+    *,
+    tolerance_cells: int = 2,
+    distances1: DistanceMaps | None = None,
+    distances2: DistanceMaps | None = None,
+) -> int:
+    """Cells in the largest 8-connected group of conflicts (:class:`Agreement`) on m1's
+    lattice: the longest stretch of wall of one map lying on open floor of the other.
+
+    Scattered conflict cells come from drift and sensor noise and appear under the true
+    transform too; a long unbroken line of them is a wall the other map saw straight
+    through, evidence that the placement is wrong (DESIGN §5 step 6, the judge).
+
+    Parameters
+    ----------
+    m1, m2 : GridMap
+        Two maps of one resolution, each with a known cell.
+    map1_from_map2 : array_like, shape (3,)
+        Metres and radians.
+    tolerance_cells : int, default 2
+        As in :func:`acceptance_index`.
+    distances1, distances2 : DistanceMaps, optional
+        Precomputed ``distance_maps`` of m1 and m2.
+
+    Returns
+    -------
+    int
+        Size in cells of the largest group (0 when there is no conflict).
+
+    Raises
+    ------
+    ValueError
+        As :func:`acceptance_index`.
+    """
+    transform = check_transform(map1_from_map2)
+    check_same_resolution(m1, m2)
+    _check_has_known(m1, "map 1")
+    _check_has_known(m2, "map 2")
+    if not (isinstance(tolerance_cells, int) and tolerance_cells >= 0):
+        raise ValueError(f"tolerance_cells must be an int >= 0, got {tolerance_cells!r}")
+    d1 = _checked_distances(m1, distances1, "distances1")
+    d2 = _checked_distances(m2, distances2, "distances2")
+    cells1, _, _, conflict = _overlap_and_conflicts(m1, m2, transform, d1, d2, tolerance_cells)
+    if not conflict.any():
+        return 0
+    mask = np.zeros(m1.shape, dtype=bool)
+    hits = cells1[conflict]
+    mask[hits[:, 0], hits[:, 1]] = True
+    labels, count = ndimage.label(mask, structure=np.ones((3, 3), dtype=bool))
+    return int(np.bincount(labels.ravel())[1:].max()) if count else 0
