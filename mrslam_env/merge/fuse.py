@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -136,6 +137,40 @@ def _upsample(
     return out
 
 
+@numba.njit(cache=True)
+def _warp_kernel(
+    source: NDArray[np.int8],
+    source_x: float,
+    source_y: float,
+    source_resolution: float,
+    rows: int,
+    cols: int,
+    origin_x: float,
+    origin_y: float,
+    resolution: float,
+    tx: float,
+    ty: float,
+    cos_t: float,
+    sin_t: float,
+) -> NDArray[np.int8]:
+    """Inverse nearest-neighbour mapping: each output cell centre is taken by
+    ``(tx, ty, theta)`` = source_from_output into the source grid, whose cell under it
+    gives the class (UNKNOWN outside)."""
+    source_rows, source_cols = source.shape
+    out = np.full((rows, cols), UNKNOWN, dtype=np.int8)
+    for row in range(rows):
+        y = origin_y + (row + 0.5) * resolution
+        for col in range(cols):
+            x = origin_x + (col + 0.5) * resolution
+            sx = cos_t * x - sin_t * y + tx
+            sy = sin_t * x + cos_t * y + ty
+            source_col = math.floor((sx - source_x) / source_resolution)
+            source_row = math.floor((sy - source_y) / source_resolution)
+            if 0 <= source_row < source_rows and 0 <= source_col < source_cols:
+                out[row, col] = source[source_row, source_col]
+    return out
+
+
 def _image_bounds(m2: GridMap, map1_from_map2: NDArray[np.float64]) -> NDArray[np.float64]:
     """``(xmin, ymin, xmax, ymax)`` in map 1's frame of m2's extent's four corners."""
     x0, y0, x1, y1 = m2.extent
@@ -221,21 +256,22 @@ def warp_map(m2: GridMap, map1_from_map2: ArrayLike, *, like: GridMap | None = N
     else:
         _check_not_empty(like, "like")
         check_same_resolution(like, m2)
-    rows, cols = like.shape
-    out = np.full((rows, cols), UNKNOWN, dtype=np.int8)
     map2_from_map1 = inverse(transform)
-    column_indices = np.arange(cols)
-    # Row by row keeps the temporaries small on very large grids.
-    block = max(1, 1_000_000 // max(cols, 1))
-    for start in range(0, rows, block):
-        row_indices = np.arange(start, min(rows, start + block))
-        grid_rows, grid_cols = np.meshgrid(row_indices, column_indices, indexing="ij")
-        centres = like.cell_to_world(np.stack([grid_rows.ravel(), grid_cols.ravel()], axis=-1))
-        source = m2.world_to_cell(transform_points(map2_from_map1, centres))
-        inside = m2.contains(source)
-        values = np.full(len(source), UNKNOWN, dtype=np.int8)
-        values[inside] = m2.cells[source[inside, 0], source[inside, 1]]
-        out[start : start + len(row_indices)] = values.reshape(len(row_indices), cols)
+    out = _warp_kernel(
+        m2.cells,
+        float(m2.origin[0]),
+        float(m2.origin[1]),
+        m2.resolution,
+        like.shape[0],
+        like.shape[1],
+        float(like.origin[0]),
+        float(like.origin[1]),
+        like.resolution,
+        float(map2_from_map1[0]),
+        float(map2_from_map1[1]),
+        math.cos(float(map2_from_map1[2])),
+        math.sin(float(map2_from_map1[2])),
+    )
     return GridMap(cells=out, resolution=like.resolution, origin=like.origin)
 
 
