@@ -82,6 +82,21 @@ def test_turning_on_the_spot_with_contact_jitter_stays_a_turn() -> None:
     assert np.abs(moved[:, 2] - 0.2).max() < 0.25  # sqrt(alpha1) * turn, 5.5 sigma
 
 
+def test_a_sideways_push_gets_no_turn_noise() -> None:
+    # Another robot pushes this one 2 cm sideways without turning it (seen in a run: the
+    # four-alpha model read rot1 = 90 degrees and threw the SLAM heading off by 45).
+    rng = np.random.default_rng(2)
+    before = np.zeros((2000, 3))
+    after = np.tile([0.0, 0.02, 0.0], (2000, 1))
+    increments = odometry_increments(before, after)
+    assert np.allclose(np.abs(increments[:, 0]), np.pi / 2)
+    noisy = sample_odometry_increments(increments, OdometryConfig(), rng)
+    moved = apply_odometry_increments(before, noisy)
+    # Heading noise as for 2 cm of travel: sqrt(alpha2) * 0.02 m = 0.0014 rad.
+    assert np.abs(moved[:, 2]).max() < 0.01
+    assert np.abs(moved[:, :2] - [0.0, 0.02]).max() < 0.02
+
+
 @pytest.mark.parametrize("kind", ["forward", "backward", "rotation", "any"])
 def test_increments_and_apply_are_exact_inverses(kind: str) -> None:
     rng = np.random.default_rng(1)

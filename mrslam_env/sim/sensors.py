@@ -61,7 +61,11 @@ def sample_odometry_increments(
     # jitter) gives an arbitrary rot1 of up to 90 degrees, and the model's noise would
     # then throw the robot tens of centimetres. Below MIN_TRAVEL the rotation counts as
     # one turn (rot1 -> 0) for the noise; the increments themselves stay exact.
-    weight = np.minimum(np.abs(trans) / MIN_TRAVEL, 1.0)
+    # Likewise a sideways shift (another robot pushing) is no turn-drive-turn of the
+    # wheels: rot1 near +-90 degrees would get rotation noise of tens of degrees. Beyond
+    # 45 degrees, rot1 folds into rot2 for the noise, wholly at 90 degrees.
+    sideways = np.clip((np.pi / 2 - np.abs(rot1)) / (np.pi / 4), 0.0, 1.0)
+    weight = np.minimum(np.abs(trans) / MIN_TRAVEL, 1.0) * sideways
     rot1, rot2 = weight * rot1, rot2 + (1.0 - weight) * rot1
     std = np.sqrt(
         np.column_stack(
