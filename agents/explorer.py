@@ -40,8 +40,9 @@ from agents.planning import (
     inflate,
     shorten_path,
 )
-from mrslam_env.geometry import world_to_cell
+from mrslam_env.geometry import compose, transform_points, world_to_cell
 from mrslam_env.gridmap import OCCUPIED, GridMap
+from mrslam_env.slam.scan import mask_returns_near
 
 __all__ = [
     "ExplorerConfig",
@@ -304,6 +305,9 @@ CLOSE_RETURN_EVERY = 5
 CLOSE_RETURN_MEMORY = 600
 """Steps a remembered return is kept."""
 ESCAPE_STEPS = 20
+"""Steps of reactive escape before replanning."""
+PEER_MARGIN = 0.15
+"""Scan returns within the robot radius plus this (m) of a sighted robot are that robot."""
 ROUTE_HYSTERESIS = 1.0
 """A routine replan to the same goal switches route only if the new one is this much
 shorter (m)."""
@@ -311,7 +315,6 @@ NO_PROGRESS_DISTANCE = 0.3
 """Getting this much closer (m) to the goal counts as progress ..."""
 NO_PROGRESS_STEPS = 150
 """... and without it for this many steps the goal is given up and the robot replans."""
-"""Steps of reactive escape before replanning."""
 
 
 class ExplorerPolicy:
@@ -355,6 +358,9 @@ class ExplorerPolicy:
         self._frontier_set: Frontiers | None = None
         self._blacklist: list[tuple[float, float, int]] = []
         self._teammate_targets = np.empty((0, 2))
+        self._teammates = np.empty((0, 2))
+        self._sighted_body = np.empty((0, 2))
+        self._replan_now = False
         self._empty_replans = 0
         self._stuck_seen = 0
         self._angles: FloatArray | None = None
@@ -390,6 +396,11 @@ class ExplorerPolicy:
         return None if self._target is None else self._target.copy()
 
     @property
+    def shared_target_radius(self) -> float:
+        """Frontier goals this close (m) to a teammate's target are the teammate's."""
+        return self.config.separation / 4
+
+    @property
     def done(self) -> bool:
         """True when no frontier worth visiting is left (exploration finished)."""
         return self.status == "done"
@@ -415,11 +426,52 @@ class ExplorerPolicy:
         self._empty_replans = 0
         self._last_replan_step = -(10**9)
 
+    def change_frame(self, new_from_old: ArrayLike) -> None:
+        """The map frame changes (the robot now explores a merged map in a teammate's
+        frame): carry what the policy remembers in map coordinates (remembered
+        obstacles, blacklisted goals, the current target) over with the SE(2) transform
+        ``new_from_old`` (3,), and drop the path, which is replanned on the next step."""
+        transform = np.asarray(new_from_old, dtype=np.float64).reshape(3)
+        if not np.all(np.isfinite(transform)):
+            raise ValueError(f"change_frame needs a finite (x, y, theta), got {new_from_old!r}")
+        self._close_returns = deque(
+            (step, transform_points(transform, points)) for step, points in self._close_returns
+        )
+        if self._blacklist:
+            points = transform_points(transform, np.array([(x, y) for x, y, _ in self._blacklist]))
+            self._blacklist = [
+                (float(x), float(y), until)
+                for (x, y), (_, _, until) in zip(points, self._blacklist, strict=True)
+            ]
+        if self._target is not None:
+            self._target = transform_points(transform, self._target[None, :2])[0]
+        if self._given_goal is not None:
+            self._given_goal = transform_points(transform, self._given_goal[None, :])[0]
+        if len(self._target_cells):
+            self._target_cells = transform_points(transform, self._target_cells)
+        self._still_pose = compose(transform, self._still_pose)
+        self._best_distance, self._best_step = math.inf, self._step
+        self.follower.clear()
+        self._last_replan_step = -(10**9)
+
     def set_teammate_targets(self, points: ArrayLike) -> None:
         """Teammates' targets (K, 2) in this robot's map frame: frontiers near them are
         discounted (``separation``). An empty array clears them."""
         targets = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         self._teammate_targets = targets[np.all(np.isfinite(targets), axis=1)]
+
+    def set_teammates(self, positions: ArrayLike) -> None:
+        """Teammates' positions (K, 2) in this robot's map frame: planning treats each as
+        an obstacle of the robot's footprint, so that paths pass round a teammate
+        instead of through it (SLAM leaves robots out of the maps). Empty clears them."""
+        points = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
+        self._teammates = points[np.all(np.isfinite(points), axis=1)]
+
+    def request_replan(self) -> None:
+        """Replan on the next step (the coordinator saw two robots heading for one
+        target)."""
+        self._last_replan_step = -(10**9)
+        self._replan_now = True
 
     # --- the policy ------------------------------------------------------------------------
 
@@ -447,6 +499,7 @@ class ExplorerPolicy:
         pose = np.asarray(
             observation["pose"] if pose_in_map is None else pose_in_map, dtype=np.float64
         )[:3]
+        self._sight_peers(observation.get("peer"))
         self._remember_close_returns(observation.get("scan"), pose)
         reason = self._replan_reason(robot_map, pose)
         if reason:
@@ -490,6 +543,12 @@ class ExplorerPolicy:
         if self._angles is None or len(self._angles) != len(ranges):
             self._clearance(ranges)
         assert self._angles is not None
+        if len(self._sighted_body):
+            # A robot is no obstacle to remember: it moves on (and a phantom wall where
+            # it stood would close a corridor for minutes).
+            ranges = mask_returns_near(
+                ranges, self._sighted_body, self.config.planner.robot_radius + PEER_MARGIN, np.inf
+            )
         close = ranges < CLOSE_RETURN_RANGE
         if not close.any():
             return
@@ -500,10 +559,30 @@ class ExplorerPolicy:
         while self._close_returns and self._close_returns[0][0] < horizon:
             self._close_returns.popleft()
 
+    def _sight_peers(self, peer: Any) -> None:
+        """Body-frame positions (K, 2) of the robots the peer sensor sees now (rows
+        ``(detected, range, bearing, heading)``)."""
+        self._sighted_body = np.empty((0, 2))
+        if peer is None:
+            return
+        rows = np.asarray(peer, dtype=np.float64).reshape(-1, 4)
+        rows = rows[rows[:, 0] > 0.5]
+        self._sighted_body = rows[:, 1:2] * np.column_stack(
+            [np.cos(rows[:, 2]), np.sin(rows[:, 2])]
+        )
+
     def _with_close_returns(self, grid: GridMap) -> GridMap:
-        if not self._close_returns:
+        """The map with remembered close returns and teammates' footprints marked
+        OCCUPIED (what the planner plans on)."""
+        parts = [p for _, p in self._close_returns]
+        robots = self._teammates
+        if len(robots):
+            radius_cells = self.config.planner.robot_radius / grid.resolution
+            footprint = _disk_offsets(radius_cells) * grid.resolution
+            parts.extend(centre + footprint[:, ::-1] for centre in robots)
+        if not parts:
             return grid
-        points = np.concatenate([p for _, p in self._close_returns])
+        points = np.concatenate(parts)
         cells = grid.world_to_cell(points)
         cells = cells[grid.contains(cells)]
         if len(cells) == 0:
@@ -527,6 +606,9 @@ class ExplorerPolicy:
     def _replan_reason(self, grid: GridMap, pose: FloatArray) -> str:
         config = self.config
         since = self._step - self._last_replan_step
+        if self._replan_now:
+            self._replan_now = False
+            return "requested"
         if self.follower.stuck_events != self._stuck_seen:
             self._stuck_seen = self.follower.stuck_events
             if self._target is not None and self._given_goal is None:
@@ -710,6 +792,10 @@ class ExplorerPolicy:
             frontiers.goals, self._teammate_targets, config.separation
         )
         utility = frontier_utility(gains, path_costs, config.cost_weight, min_gain=config.min_gain)
+        if len(self._teammate_targets):
+            # A teammate's own target is taken, however big its gain.
+            taken = _separation_discount(frontiers.goals, self._teammate_targets, 1.0)
+            utility[taken < self.shared_target_radius] = -np.inf
         if self._blacklist:
             points = np.array([(x, y) for x, y, _ in self._blacklist])
             near = _separation_discount(frontiers.goals, points, config.blacklist_radius) < 1.0

@@ -49,13 +49,24 @@ class RendezvousConfig:
     """After both robots arrived, wait this many steps for a sighting before rejecting."""
     timeout_steps: int = 900
     """Give up on a rendezvous (reject) after this many steps in all."""
+    confirm_motion: float = 1.0
+    """One matching sighting is not enough: a wrong hypothesis that differs from the
+    truth by a symmetry of the building centred near the robots predicts the other robot
+    where it is at one instant. The hypothesis is accepted once the sightings have kept
+    matching while the robots moved this far (m, both robots' travel added up) since the
+    first match; any contradicting sighting rejects it."""
+    confirm_sightings: int = 3
+    """... and at least this many matching sightings were made."""
+    confirm_steps: int = 150
+    """Steps after the first match within which the confirmation must come; otherwise the
+    hypothesis is set aside unjudged (not rejected: it is proposed again later)."""
 
     def __post_init__(self) -> None:
-        for name in ("position_tolerance", "heading_tolerance"):
+        for name in ("position_tolerance", "heading_tolerance", "confirm_motion"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"RendezvousConfig.{name} must be > 0, got {value!r}")
-        for name in ("wait_steps", "timeout_steps"):
+        for name in ("wait_steps", "timeout_steps", "confirm_sightings", "confirm_steps"):
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= 1):
                 raise ValueError(f"RendezvousConfig.{name} must be an int >= 1, got {value!r}")

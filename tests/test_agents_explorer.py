@@ -216,3 +216,86 @@ def test_close_scan_returns_the_map_misses_are_planned_around() -> None:
     )
     assert np.hypot(*(samples - post).T).min() > 0.25, "the path keeps clear of the post"
     np.testing.assert_allclose(policy.plan[-1], [6.0, 4.0], atol=0.1)
+
+
+def open_room(size: int = 80) -> GridMap:
+    cells = np.full((size, size), FREE, dtype=np.int8)
+    cells[[0, -1], :] = OCCUPIED
+    cells[:, [0, -1]] = OCCUPIED
+    return GridMap(cells=cells, resolution=0.1)
+
+
+def test_a_teammates_target_is_never_shared() -> None:
+    # Only the east doorway is left; the teammate already heads there.
+    grid = two_rooms()
+    grid.cells[40:60, 20] = OCCUPIED  # close the west doorway
+    policy = ExplorerPolicy(np.random.default_rng(0))
+    alone = ExplorerPolicy(np.random.default_rng(0))
+    alone.act({"pose": np.array([3.5, 2.5, 0.0])}, grid)
+    assert alone.target is not None
+    policy.set_teammate_targets(alone.target[None])
+    policy.act({"pose": np.array([3.5, 2.5, 0.0])}, grid)
+    assert policy.target is None or np.hypot(*(policy.target - alone.target)) >= 1.0
+
+
+def test_a_teammate_is_planned_around() -> None:
+    grid = open_room()
+    policy = ExplorerPolicy(np.random.default_rng(0))
+    teammate = np.array([4.0, 4.0])
+    policy.set_teammates(teammate[None])
+    policy.set_goal([6.0, 4.0])
+    policy.act({"pose": np.array([2.0, 4.0, 0.0])}, grid)
+    samples = np.concatenate(
+        [np.linspace(a, b, 20) for a, b in zip(policy.plan[:-1], policy.plan[1:], strict=True)]
+    )
+    assert np.hypot(*(samples - teammate).T).min() > 0.35, "the path passes round the teammate"
+    policy.set_teammates(np.empty((0, 2)))
+    policy.set_goal([6.0, 4.0])
+    policy.act({"pose": np.array([2.0, 4.0, 0.0])}, grid)
+    assert np.abs(policy.plan[:, 1] - 4.0).max() < 0.05  # without it, straight through
+
+
+def test_changing_frame_carries_remembered_obstacles_and_goals_over() -> None:
+    grid = open_room()
+    pose = np.array([2.0, 4.0, 0.0])
+    angles = -np.pi + np.arange(360) * (2 * np.pi / 360)
+    scan = np.full(360, 8.0)
+    scan[np.abs(angles) < np.radians(12)] = 0.45  # a post at (2.45, 4.0) the map lacks
+    policy = ExplorerPolicy(np.random.default_rng(0))
+    policy.set_goal([6.0, 4.0])
+    for _ in range(6):
+        policy.act({"pose": pose, "scan": scan}, grid)
+    # The new frame is the old one shifted by (1, -1) m: the post is now at (3.45, 3.0).
+    new_from_old = np.array([1.0, -1.0, 0.0])
+    policy.change_frame(new_from_old)
+    assert policy.target is not None
+    np.testing.assert_allclose(policy.target, [7.0, 3.0], atol=1e-9)
+    assert len(policy.plan) == 0  # the old path is dropped ...
+    policy.act({"pose": np.array([3.0, 3.0, 0.0]), "scan": scan}, grid)
+    assert len(policy.plan) >= 2  # ... and replanned in the new frame round the moved post
+    post = np.array([3.45, 3.0])
+    samples = np.concatenate(
+        [np.linspace(a, b, 20) for a, b in zip(policy.plan[:-1], policy.plan[1:], strict=True)]
+    )
+    assert np.hypot(*(samples - post).T).min() > 0.25
+    np.testing.assert_allclose(policy.plan[-1], [7.0, 3.0], atol=0.1)
+    with pytest.raises(ValueError, match="change_frame"):
+        policy.change_frame([np.nan, 0.0, 0.0])
+
+
+def test_a_sighted_robot_is_not_remembered_as_an_obstacle() -> None:
+    # The same close returns as the post above, but the peer sensor says they are a
+    # robot: it moves on, so no phantom wall is left where it stood.
+    grid = open_room()
+    pose = np.array([2.0, 4.0, 0.0])
+    angles = -np.pi + np.arange(360) * (2 * np.pi / 360)
+    scan = np.full(360, 8.0)
+    scan[np.abs(angles) < np.radians(12)] = 0.45
+    for peer, straight in ((np.array([[1.0, 0.6, 0.0, np.pi]]), True), (np.zeros((1, 4)), False)):
+        policy = ExplorerPolicy(np.random.default_rng(0))
+        policy.set_goal([6.0, 4.0])
+        for _ in range(6):
+            policy.act({"pose": pose, "scan": scan, "peer": peer}, grid)
+        policy.set_goal([6.0, 4.0])
+        policy.act({"pose": pose, "scan": np.full(360, 8.0), "peer": np.zeros((1, 4))}, grid)
+        assert (np.abs(policy.plan[:, 1] - 4.0).max() < 0.05) == straight

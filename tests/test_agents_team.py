@@ -6,10 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.team import TeamConfig, TeamCoordinator, TeamState
+from agents.team import TeamConfig, TeamCoordinator, TeamState, in_plain_sight
 from mrslam_env.config import EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
 from mrslam_env.geometry import compose, inverse
+from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from scenarios.runner import _MapCache
 
 # Both robots in the office corridor (y 7..9), 5 m apart, facing each other: in comm
@@ -107,8 +108,55 @@ def test_a_hypothesis_that_puts_the_robots_in_sight_is_settled_where_they_stand(
         decisions = [d.text for d in team.pop_decisions()]
         assert team.hypotheses_tested == 1
         if accepted:
+            # Seen where predicted: confirmed by further sightings while both explore on,
+            # with no drive to a meeting point.
+            assert team.state is TeamState.HYPOTHESIS_VERIFICATION, decisions
+            assert team.rendezvous is not None and team.rendezvous.in_place
+            for _ in range(200):
+                actions = team.act([observations[a] for a in agents], maps)
+                observations, *_ = env.step({a: actions[i] for i, a in enumerate(agents)})
+                decisions += [d.text for d in team.pop_decisions()]
+                if team.state is not TeamState.HYPOTHESIS_VERIFICATION:
+                    break
             assert team.state is TeamState.COORDINATED_EXPLORATION, decisions
+            assert any("sightings while the robots moved" in d for d in decisions), decisions
+            assert team.step_verified is not None and team.step_verified < 150
         else:
             assert team.state is TeamState.NO_INTERACTION, decisions
             assert any("rejected where the robots stand" in d for d in decisions), decisions
-        assert team.rendezvous is None, "no drive to a meeting point was needed"
+        assert team.rendezvous is None
+
+
+def test_refinement_never_leaves_what_the_rendezvous_verified() -> None:
+    team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0))
+    verified = np.array([2.0, 1.0, 0.5])
+    team.preliminary_transform = verified
+    team._verified_at = np.array([3.0, -1.0])
+    tolerance = team.config.rendezvous.position_tolerance
+    assert team._within_verified(compose(verified, [0.1, -0.1, 0.01]))
+    # Turned about the meeting point by less than the heading tolerance: still verified.
+    about_meeting = compose(
+        compose(verified, [3.0, -1.0, 0.0]), compose([0.0, 0.0, 0.2], [-3.0, 1.0, 0.0])
+    )
+    assert team._within_verified(about_meeting)
+    assert not team._within_verified(compose(verified, [tolerance + 0.1, 0.0, 0.0]))
+    assert not team._within_verified(compose(verified, [0.0, 0.0, np.pi]))  # a symmetry
+
+
+def test_plain_sight_needs_known_free_space_all_the_way() -> None:
+    cells = np.full((60, 100), FREE, dtype=np.int8)  # 10 m x 6 m at 0.1 m
+    grid = GridMap(cells=cells, resolution=0.1)
+    observer = np.array([2.0, 3.0, np.pi / 2])  # facing +y: body x is world y
+    ahead = np.array([0.0, -2.0, 0.0])  # 2 m to its right, at world (4, 3)
+    assert in_plain_sight(observer, ahead, grid)
+    assert not in_plain_sight(observer, np.array([0.0, -4.5, 0.0]), grid)  # too far
+    assert not in_plain_sight(observer, np.array([0.0, -0.3, 0.0]), grid)  # touching
+    wall = cells.copy()
+    wall[:, 30] = OCCUPIED  # x = 3.0 m, across the line
+    assert not in_plain_sight(observer, ahead, GridMap(cells=wall, resolution=0.1))
+    beside = cells.copy()
+    beside[32:40, 25:35] = OCCUPIED  # a post 0.2 m beside the line
+    assert not in_plain_sight(observer, ahead, GridMap(cells=beside, resolution=0.1))
+    unknown = cells.copy()
+    unknown[28:33, 35] = UNKNOWN  # not known to be free
+    assert not in_plain_sight(observer, ahead, GridMap(cells=unknown, resolution=0.1))
