@@ -18,13 +18,23 @@ def test_a_tiny_benchmark_pairs_coordinated_and_independent_runs() -> None:
     assert row["unfinished_coordinated"] == row["unfinished_independent"] == 1
     table = format_explore_table(rows).splitlines()
     assert table[0].startswith("| scenario | t90 coordinated (s)")
-    assert table[2].startswith("| maze (1/1 never reached 90 %) | 12.0 | 12.0 | 1.00× | 0/1 |")
+    assert table[2].startswith(
+        "| maze (1/1 never reached 90 %) | 12.0 | 12.0 | 1.00× | 0/1 | 0/1 |"
+    )
 
 
 def test_summary_counts_wrong_merges_and_speed_up() -> None:
-    def run(interaction: bool, t90: float, verified: bool = False, error: float = 0.0):
+    def run(
+        interaction: bool,
+        t90: float,
+        verified: bool = False,
+        error: float = 0.0,
+        seed: int = 0,
+        scenario: str = "s",
+    ):
         return {
-            "scenario": "s",
+            "scenario": scenario,
+            "seed": seed,
             "interaction": interaction,
             "t90": t90,
             "t90_or_limit": t90,
@@ -34,8 +44,19 @@ def test_summary_counts_wrong_merges_and_speed_up() -> None:
             "hypotheses_tested": 1,
         }
 
-    runs = [run(True, 50.0, True, 0.05), run(True, 70.0, True, 0.8), run(False, 90.0)]
+    runs = [
+        run(True, 50.0, True, 0.05),
+        run(True, 70.0, True, 0.8, seed=1),
+        run(False, 90.0),
+        run(False, 60.0, seed=1),
+        run(True, 30.0, scenario="t"),
+        run(False, 30.0, scenario="t"),
+    ]
     row = _summarise("s", runs)
-    assert row["t90_coordinated"] == 60.0 and row["t90_independent"] == 90.0
-    assert row["speedup"] == 1.5 and row["verified"] == 2 and row["wrong_accepted"] == 1
+    assert row["t90_coordinated"] == 60.0 and row["t90_independent"] == 75.0
+    assert row["speedup"] == 1.25 and row["verified"] == 2 and row["wrong_accepted"] == 1
     assert row["max_translation_error"] == 0.8
+    assert row["faster"] == 1  # seed 0 sooner, seed 1 later than alone
+    total = _summarise(None, runs)
+    assert total["scenario"] == "all" and total["runs"] == 3 and total["faster"] == 1
+    assert total["t90_coordinated"] == 50.0 and total["t90_independent"] == 60.0
