@@ -468,17 +468,8 @@ def acceptance_index(
         Different resolutions, empty or all-unknown maps, a non-finite transform, or a
         negative tolerance.
     """
-    transform = check_transform(map1_from_map2)
-    check_same_resolution(m1, m2)
-    _check_has_known(m1, "map 1")
-    _check_has_known(m2, "map 2")
-    if not (isinstance(tolerance_cells, int) and tolerance_cells >= 0):
-        raise ValueError(f"tolerance_cells must be an int >= 0, got {tolerance_cells!r}")
-    d1 = _checked_distances(m1, distances1, "distances1")
-    d2 = _checked_distances(m2, distances2, "distances2")
-
-    _, values1, values2, conflict = _overlap_and_conflicts(
-        m1, m2, transform, d1, d2, tolerance_cells
+    d1, d2, (_, values1, values2, conflict) = _checked_overlap(
+        m1, m2, map1_from_map2, tolerance_cells, distances1, distances2
     )
     overlap = len(values1)
     agree = int(np.count_nonzero(values1 == values2))
@@ -497,6 +488,31 @@ def acceptance_index(
         overlap_fraction=overlap / min(known1, known2),
         conflict_fraction=conflicts / overlap if overlap else 0.0,
     )
+
+
+def _checked_overlap(
+    m1: GridMap,
+    m2: GridMap,
+    map1_from_map2: ArrayLike,
+    tolerance_cells: int,
+    distances1: DistanceMaps | None,
+    distances2: DistanceMaps | None,
+) -> tuple[
+    DistanceMaps,
+    DistanceMaps,
+    tuple[NDArray[np.int64], NDArray[np.int8], NDArray[np.int8], NDArray[np.bool_]],
+]:
+    """Validate the inputs of :func:`acceptance_index` / :func:`largest_conflict`, then
+    :func:`_overlap_and_conflicts`; returns the distance maps used, and its result."""
+    transform = check_transform(map1_from_map2)
+    check_same_resolution(m1, m2)
+    _check_has_known(m1, "map 1")
+    _check_has_known(m2, "map 2")
+    if not (isinstance(tolerance_cells, int) and tolerance_cells >= 0):
+        raise ValueError(f"tolerance_cells must be an int >= 0, got {tolerance_cells!r}")
+    d1 = _checked_distances(m1, distances1, "distances1")
+    d2 = _checked_distances(m2, distances2, "distances2")
+    return d1, d2, _overlap_and_conflicts(m1, m2, transform, d1, d2, tolerance_cells)
 
 
 def _overlap_and_conflicts(
@@ -562,15 +578,9 @@ def largest_conflict(
     ValueError
         As :func:`acceptance_index`.
     """
-    transform = check_transform(map1_from_map2)
-    check_same_resolution(m1, m2)
-    _check_has_known(m1, "map 1")
-    _check_has_known(m2, "map 2")
-    if not (isinstance(tolerance_cells, int) and tolerance_cells >= 0):
-        raise ValueError(f"tolerance_cells must be an int >= 0, got {tolerance_cells!r}")
-    d1 = _checked_distances(m1, distances1, "distances1")
-    d2 = _checked_distances(m2, distances2, "distances2")
-    cells1, _, _, conflict = _overlap_and_conflicts(m1, m2, transform, d1, d2, tolerance_cells)
+    _, _, (cells1, _, _, conflict) = _checked_overlap(
+        m1, m2, map1_from_map2, tolerance_cells, distances1, distances2
+    )
     if not conflict.any():
         return 0
     mask = np.zeros(m1.shape, dtype=bool)
