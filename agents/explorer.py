@@ -42,7 +42,7 @@ from agents.planning import (
 )
 from mrslam_env.geometry import compose, transform_points, world_to_cell
 from mrslam_env.gridmap import OCCUPIED, GridMap
-from mrslam_env.slam.scan import mask_returns_near
+from mrslam_env.slam.scan import mask_returns_near, sighted_positions
 
 __all__ = [
     "ExplorerConfig",
@@ -470,7 +470,6 @@ class ExplorerPolicy:
     def request_replan(self) -> None:
         """Replan on the next step (the coordinator saw two robots heading for one
         target)."""
-        self._last_replan_step = -(10**9)
         self._replan_now = True
 
     # --- the policy ------------------------------------------------------------------------
@@ -499,7 +498,8 @@ class ExplorerPolicy:
         pose = np.asarray(
             observation["pose"] if pose_in_map is None else pose_in_map, dtype=np.float64
         )[:3]
-        self._sight_peers(observation.get("peer"))
+        peer = observation.get("peer")
+        self._sighted_body = np.empty((0, 2)) if peer is None else sighted_positions(peer)
         self._remember_close_returns(observation.get("scan"), pose)
         reason = self._replan_reason(robot_map, pose)
         if reason:
@@ -558,18 +558,6 @@ class ExplorerPolicy:
         horizon = self._step - CLOSE_RETURN_MEMORY
         while self._close_returns and self._close_returns[0][0] < horizon:
             self._close_returns.popleft()
-
-    def _sight_peers(self, peer: Any) -> None:
-        """Body-frame positions (K, 2) of the robots the peer sensor sees now (rows
-        ``(detected, range, bearing, heading)``)."""
-        self._sighted_body = np.empty((0, 2))
-        if peer is None:
-            return
-        rows = np.asarray(peer, dtype=np.float64).reshape(-1, 4)
-        rows = rows[rows[:, 0] > 0.5]
-        self._sighted_body = rows[:, 1:2] * np.column_stack(
-            [np.cos(rows[:, 2]), np.sin(rows[:, 2])]
-        )
 
     def _with_close_returns(self, grid: GridMap) -> GridMap:
         """The map with remembered close returns and teammates' footprints marked
@@ -794,8 +782,9 @@ class ExplorerPolicy:
         utility = frontier_utility(gains, path_costs, config.cost_weight, min_gain=config.min_gain)
         if len(self._teammate_targets):
             # A teammate's own target is taken, however big its gain.
-            taken = _separation_discount(frontiers.goals, self._teammate_targets, 1.0)
-            utility[taken < self.shared_target_radius] = -np.inf
+            radius = self.shared_target_radius
+            taken = _separation_discount(frontiers.goals, self._teammate_targets, radius) < 1.0
+            utility[taken] = -np.inf
         if self._blacklist:
             points = np.array([(x, y) for x, y, _ in self._blacklist])
             near = _separation_discount(frontiers.goals, points, config.blacklist_radius) < 1.0

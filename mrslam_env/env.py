@@ -115,7 +115,7 @@ from mrslam_env.sim.simulator import SimState, Simulator
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
 from mrslam_env.slam.local_map import local_map
 from mrslam_env.slam.raycast import mark_scan_observed
-from mrslam_env.slam.scan import mask_returns_near
+from mrslam_env.slam.scan import mask_returns_near, sighted_positions
 from mrslam_env.slam.slam import RobotSlam
 from mrslam_env.worlds import build_world
 
@@ -324,13 +324,9 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         """The scan SLAM integrates: returns from the robots the peer sensor detects are
         dropped (a robot is not part of the static map, and touching robots would pull
         the scan match). The ``scan`` observation itself is left whole."""
-        peers = state.peers[robot]
-        seen = peers[:, 0] > 0.5
-        if not seen.any():
+        points = sighted_positions(state.peers[robot])
+        if len(points) == 0:
             return state.scans[robot]
-        points = peers[seen, 1:2] * np.column_stack(
-            [np.cos(peers[seen, 2]), np.sin(peers[seen, 2])]
-        )
         radius = self.config.robot.radius + PEER_MASK_MARGIN
         return mask_returns_near(state.scans[robot], points, radius, self.config.lidar.max_range)
 

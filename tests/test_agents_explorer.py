@@ -238,6 +238,17 @@ def test_a_teammates_target_is_never_shared() -> None:
     assert policy.target is None or np.hypot(*(policy.target - alone.target)) >= 1.0
 
 
+@pytest.mark.parametrize("separation", [4.0, 8.0])
+def test_only_frontiers_near_a_teammates_target_are_taken(separation: float) -> None:
+    # The teammate heads for the west doorway; the east one, 6 m away, stays available
+    # whatever the separation (a wider one must not exclude every frontier).
+    grid = two_rooms()
+    policy = ExplorerPolicy(np.random.default_rng(0), ExplorerConfig(separation=separation))
+    policy.set_teammate_targets(np.array([[1.0, 2.5]]))
+    policy.act({"pose": np.array([3.5, 2.5, 0.0])}, grid)
+    assert policy.target is not None and policy.target[0] > 6.0
+
+
 def test_a_teammate_is_planned_around() -> None:
     grid = open_room()
     policy = ExplorerPolicy(np.random.default_rng(0))

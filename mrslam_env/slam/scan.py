@@ -10,7 +10,7 @@ import math
 
 import numba
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 
@@ -20,6 +20,7 @@ __all__ = [
     "mask_returns_near",
     "scan_normals",
     "scan_points",
+    "sighted_positions",
 ]
 
 NORMAL_HALF_WIDTH = 2
@@ -124,6 +125,14 @@ def scan_normals(
         normals[i, 0] = nx / norm
         normals[i, 1] = ny / norm
     return normals
+
+
+def sighted_positions(peers: ArrayLike) -> FloatArray:
+    """Sensor-frame positions (K, 2) of the robots a peer observation detects (rows
+    ``(detected, range, bearing, heading)``; rows with ``detected`` < 0.5 are skipped)."""
+    rows = np.asarray(peers, dtype=np.float64).reshape(-1, 4)
+    rows = rows[rows[:, 0] > 0.5]
+    return rows[:, 1:2] * np.column_stack([np.cos(rows[:, 2]), np.sin(rows[:, 2])])
 
 
 def mask_returns_near(
