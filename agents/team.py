@@ -212,10 +212,19 @@ class TeamCoordinator:
         self.hypotheses_tested = 0
         self.step_verified: int | None = None
         self.merged_map: GridMap | None = None
+        """Robot 0's view of the merged map (its own map and robot 1's as last received),
+        in map 0's frame; robot 1 explores :attr:`views` ``[1]``."""
+        self.views: list[GridMap | None] = [None, None]
+        """Per robot, the merged map it explores, in map 0's frame: its own map, current,
+        fused with the other robot's as it last received it. The two are one map while
+        the link is up; while it is down, each robot still sees all of its own mapping
+        (a robot exploring on a stale copy of its own map drives to frontiers it has
+        already explored)."""
         self.rendezvous: _Rendezvous | None = None
         self._decisions: list[Decision] = []
-        self._peer_map: GridMap | None = None
-        """Robot 1's map as robot 0 last received it (while the link was up)."""
+        self._received: list[GridMap | None] = [None, None]
+        """Per robot, the other robot's map as it last received it (while the link was
+        up)."""
         self._last_merge_step = -(10**9)
         self._last_refine_step = 0
         self._retry_area = 0.0
@@ -539,8 +548,8 @@ class TeamCoordinator:
         # Robot 1 now explores the merged map, in robot 0's frame.
         self.explorers[1].change_frame(transform)
         self.state = TeamState.COORDINATED_EXPLORATION
-        self._peer_map = m1
-        self._fuse(m0)
+        self._received = [m1, m0]
+        self._fuse(maps, shared=True)
 
     def _reject(self, rendezvous: _Rendezvous, maps: MapSource, why: str) -> None:
         self._decide(f"hypothesis #{rendezvous.index} rejected: {why}")
@@ -560,29 +569,38 @@ class TeamCoordinator:
 
     def _keep_merged_map(self, maps: MapSource, link: bool) -> None:
         assert self.transform is not None
-        refresh = self.step - self._last_merge_step >= self.config.merged_map_every
-        if link and refresh:
-            self._peer_map = maps(1)
+        if self.step - self._last_merge_step < self.config.merged_map_every:
+            return
+        if link:
+            self._received = [maps(1), maps(0)]
             if (
                 self.config.refine_every
                 and self.step - self._last_refine_step >= self.config.refine_every
             ):
                 refined, _, _ = refine_transform(
-                    maps(0), self._peer_map, self.transform, self.config.merge, rng=self.rng
+                    maps(0), maps(1), self.transform, self.config.merge, rng=self.rng
                 )
                 if self._within_verified(refined):
                     self.explorers[1].change_frame(compose(refined, inverse(self.transform)))
                     self.transform = refined
                 self._last_refine_step = self.step
-        if refresh:
-            self._fuse(maps(0))
+        self._fuse(maps, shared=link)
 
-    def _fuse(self, own0: GridMap) -> None:
-        assert self.transform is not None and self._peer_map is not None
-        peer = self._peer_map
-        if not math.isclose(peer.resolution, own0.resolution):
-            peer = resample_map(peer, own0.resolution)
-        self.merged_map = fuse_maps(own0, peer, self.transform)
+    def _fuse(self, maps: MapSource, *, shared: bool) -> None:
+        """Refresh both robots' views; ``shared``: each has the other's current map (the
+        link is up), so the two views are one fusion."""
+        assert self.transform is not None
+        own = [maps(0), maps(1)]
+        views: list[GridMap] = []
+        for i in range(2 if not shared else 1):
+            other = self._received[i]
+            assert other is not None
+            m0, m1 = (own[0], other) if i == 0 else (other, own[1])
+            if not math.isclose(m1.resolution, m0.resolution):
+                m1 = resample_map(m1, m0.resolution)
+            views.append(fuse_maps(m0, m1, self.transform))
+        self.views = [views[0], views[-1]]
+        self.merged_map = views[0]
         self._last_merge_step = self.step
 
     def _act_coordinated(self, observations: list[dict[str, Any]]) -> list[NDArray[np.float32]]:
@@ -610,5 +628,7 @@ class TeamCoordinator:
                 and np.hypot(*(mine - target)) < explorer.shared_target_radius
             ):
                 explorer.request_replan()  # both heading for one frontier: robot 1 yields
-            actions.append(explorer.act(observations[i], self.merged_map, pose_in_map=poses0[i]))
+            view = self.views[i]
+            assert view is not None
+            actions.append(explorer.act(observations[i], view, pose_in_map=poses0[i]))
         return actions

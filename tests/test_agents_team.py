@@ -160,3 +160,41 @@ def test_plain_sight_needs_known_free_space_all_the_way() -> None:
     unknown = cells.copy()
     unknown[28:33, 35] = UNKNOWN  # not known to be free
     assert not in_plain_sight(observer, ahead, GridMap(cells=unknown, resolution=0.1))
+
+
+def test_with_the_link_down_each_robot_sees_all_of_its_own_mapping() -> None:
+    team = TeamCoordinator(TeamConfig(merged_map_every=5), rng=np.random.default_rng(0))
+
+    def known(x0: float, x1: float) -> GridMap:
+        """10 m x 6 m at 0.1 m, FREE for x0 <= x < x1, UNKNOWN elsewhere."""
+        cells = np.full((60, 100), UNKNOWN, dtype=np.int8)
+        cells[:, round(x0 * 10) : round(x1 * 10)] = FREE
+        return GridMap(cells=cells, resolution=0.1)
+
+    def state(view: GridMap, x: float) -> int:
+        row, col = view.world_to_cell(np.array([[x, 3.0]]))[0]
+        return int(view.cells[row, col])
+
+    own = [known(0.0, 3.0), known(6.0, 9.0)]  # one frame: the transform is the identity
+    team.state, team.transform = TeamState.COORDINATED_EXPLORATION, np.zeros(3)
+    team._received = [own[1], own[0]]
+    team._fuse(lambda i: own[i], shared=True)
+    assert team.views[0] is team.views[1] is team.merged_map
+    # The link goes down and both robots map on: each view has its own robot's new cells
+    # and only the other's as last received.
+    own[:] = [known(0.0, 4.0), known(5.0, 9.0)]
+    team.step += 5
+    team._keep_merged_map(lambda i: own[i], link=False)
+    view0, view1 = team.views
+    assert view0 is not None and view1 is not None and view0 is team.merged_map
+    assert (state(view0, 3.5), state(view0, 5.5)) == (FREE, UNKNOWN)
+    assert (state(view1, 3.5), state(view1, 5.5)) == (UNKNOWN, FREE)
+    # Not yet due: nothing is refreshed.
+    team.step += 1
+    team._keep_merged_map(lambda i: own[i], link=True)
+    assert team.views == [view0, view1]
+    # The link is back: one view with everything.
+    team.step += 4
+    team._keep_merged_map(lambda i: own[i], link=True)
+    assert team.views[0] is team.views[1]
+    assert (state(team.views[0], 3.5), state(team.views[0], 5.5)) == (FREE, FREE)
