@@ -51,7 +51,14 @@ from mrslam_env.merge.pipeline import (
     same_answer,
 )
 
-__all__ = ["Decision", "TeamConfig", "TeamCoordinator", "TeamState", "in_plain_sight"]
+__all__ = [
+    "Decision",
+    "TeamConfig",
+    "TeamCoordinator",
+    "TeamState",
+    "distinct_hypotheses",
+    "in_plain_sight",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -174,6 +181,20 @@ def in_plain_sight(pose: FloatArray, predicted: FloatArray, grid: GridMap) -> bo
     if not grid.contains(cells).all():
         return False
     return bool(grid.free[cells[:, 0], cells[:, 1]].all())
+
+
+def distinct_hypotheses(
+    ranked: list[FloatArray], rejected: list[FloatArray], pivot: FloatArray, config: MergeConfig
+) -> list[FloatArray]:
+    """The hypotheses worth a rendezvous each, best first: ``ranked`` without those that
+    are one answer (:func:`~mrslam_env.merge.pipeline.same_answer` at ``pivot``, a point of
+    map 1) with a better-ranked one or with a ``rejected`` one. Refined from different
+    starts, two candidates can end as one answer, and one rendezvous settles both."""
+    kept: list[FloatArray] = []
+    for transform in ranked:
+        if not any(same_answer(transform, known, pivot, config) for known in rejected + kept):
+            kept.append(transform)
+    return kept
 
 
 class TeamCoordinator:
@@ -300,15 +321,12 @@ class TeamCoordinator:
             self.state = TeamState.NO_INTERACTION
             return
         pivot = m1.cell_to_world(np.argwhere(~m1.unknown).mean(axis=0)[None, :])[0]
-        fresh = [
-            h.map1_from_map2
-            for h in result.hypotheses
-            if h.confident
-            and not any(
-                same_answer(h.map1_from_map2, rejected, pivot, self.config.merge)
-                for rejected in self.rejected
-            )
-        ]
+        fresh = distinct_hypotheses(
+            [h.map1_from_map2 for h in result.hypotheses if h.confident],
+            self.rejected,
+            pivot,
+            self.config.merge,
+        )
         self.hypotheses = fresh[: self.config.max_rendezvous]
         if not self.hypotheses:
             self._decide("no hypothesis worth a rendezvous; exploring on, retry when maps grow")

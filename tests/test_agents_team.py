@@ -6,11 +6,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.team import TeamConfig, TeamCoordinator, TeamState, in_plain_sight
+from agents.team import (
+    TeamConfig,
+    TeamCoordinator,
+    TeamState,
+    distinct_hypotheses,
+    in_plain_sight,
+)
 from mrslam_env.config import EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
+from mrslam_env.merge.pipeline import MergeConfig
 from scenarios.runner import _MapCache
 
 # Both robots in the office corridor (y 7..9), 5 m apart, facing each other: in comm
@@ -198,3 +205,17 @@ def test_with_the_link_down_each_robot_sees_all_of_its_own_mapping() -> None:
     team._keep_merged_map(lambda i: own[i], link=True)
     assert team.views[0] is team.views[1]
     assert (state(team.views[0], 3.5), state(team.views[0], 5.5)) == (FREE, FREE)
+
+
+def test_one_answer_is_put_to_one_rendezvous() -> None:
+    config = MergeConfig()
+    pivot = np.array([20.0, 0.0])  # far from the origin: a small turn moves it a lot
+    best = np.array([9.34, 3.80, -0.013])
+    same = np.array([9.35, 3.82, 0.006])  # the warehouse's three candidates of one answer
+    turned = np.array([9.34, 3.80, -0.013 + np.radians(3.0)])  # 1 m apart at the pivot
+    other = np.array([-9.0, 3.8, 3.1])
+    kept = distinct_hypotheses([best, same, turned, other], [], pivot, config)
+    assert [k.tolist() for k in kept] == [best.tolist(), turned.tolist(), other.tolist()]
+    # An answer already rejected is not tried again, nor anything that is one with it.
+    kept = distinct_hypotheses([same, turned, other], [best], pivot, config)
+    assert [k.tolist() for k in kept] == [turned.tolist(), other.tolist()]
