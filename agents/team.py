@@ -145,6 +145,9 @@ class _Rendezvous:
     previous: list[FloatArray] | None = None
     unseen: int = 0
     """Steps in a row the hypothesis put the robots in plain sight, unseen."""
+    others_unseen: dict[int, int] = field(default_factory=dict)
+    """The same count for each hypothesis still waiting its turn (by index): the drive
+    for one hypothesis also tests the others."""
 
 
 MapSource = Callable[[int], GridMap]
@@ -340,6 +343,9 @@ class TeamCoordinator:
     def _start_rendezvous(self, index: int, maps: MapSource) -> None:
         while index < len(self.hypotheses):
             hypothesis = self.hypotheses[index]
+            if any(hypothesis is rejected for rejected in self.rejected):
+                index += 1  # rejected on the way to an earlier one's meeting point
+                continue
             verdict = self._verify_in_place(hypothesis, maps(0))
             if verdict is not None:
                 self.hypotheses_tested += 1
@@ -492,6 +498,7 @@ class TeamCoordinator:
                         return
                 else:
                     rendezvous.unseen = 0
+                self._test_waiting(rendezvous, poses, maps)
         if rendezvous.first_match is not None:
             if self.step - rendezvous.first_match >= config.confirm_steps:
                 self._set_aside(rendezvous, maps, "seen where predicted, but not confirmed")
@@ -516,6 +523,33 @@ class TeamCoordinator:
             self._reject(rendezvous, maps, "arrived and waited: the other robot was not there")
         elif self.step - rendezvous.started >= config.timeout_steps:
             self._reject(rendezvous, maps, "rendezvous timed out")
+
+    def _test_waiting(
+        self, rendezvous: _Rendezvous, poses: list[FloatArray], maps: MapSource
+    ) -> None:
+        """With nobody seen: reject each hypothesis waiting its turn that has kept the
+        robots in plain sight (:func:`in_plain_sight`) for :data:`UNSEEN_STEPS` steps."""
+        for index in range(rendezvous.index + 1, len(self.hypotheses)):
+            hypothesis = self.hypotheses[index]
+            if any(hypothesis is rejected for rejected in self.rejected):
+                continue
+            predicted = predicted_relative_pose(poses[0], poses[1], hypothesis)
+            if not (
+                in_plain_sight(poses[0], predicted, maps(0))
+                or in_plain_sight(poses[1], inverse(predicted), maps(1))
+            ):
+                rendezvous.others_unseen[index] = 0
+                continue
+            unseen = rendezvous.others_unseen.get(index, 0) + 1
+            rendezvous.others_unseen[index] = unseen
+            if unseen >= UNSEEN_STEPS:
+                self.hypotheses_tested += 1
+                self.rejected.append(hypothesis)
+                self._decide(
+                    f"hypothesis #{index} rejected on the way to #{rendezvous.index}'s "
+                    f"meeting point: it kept the robots in plain sight of each other for "
+                    f"{unseen} steps, and neither saw the other"
+                )
 
     def _within_verified(self, transform: FloatArray) -> bool:
         """Whether ``transform`` stays within the rendezvous tolerances of the verified

@@ -7,9 +7,11 @@ import numpy as np
 import pytest
 
 from agents.team import (
+    UNSEEN_STEPS,
     TeamConfig,
     TeamCoordinator,
     TeamState,
+    _Rendezvous,
     distinct_hypotheses,
     in_plain_sight,
 )
@@ -219,3 +221,28 @@ def test_one_answer_is_put_to_one_rendezvous() -> None:
     # An answer already rejected is not tried again, nor anything that is one with it.
     kept = distinct_hypotheses([same, turned, other], [best], pivot, config)
     assert [k.tolist() for k in kept] == [turned.tolist(), other.tolist()]
+
+
+def test_the_drive_for_one_hypothesis_tests_the_others_waiting() -> None:
+    team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0))
+    free = GridMap(cells=np.full((100, 200), FREE, dtype=np.int8), resolution=0.1)  # 20 x 10 m
+    poses = [np.array([5.0, 5.0, 0.0]), np.array([1.0, 1.0, 0.0])]  # each in its own frame
+    driving = np.array([10.0, 0.0, 0.0])  # the one being verified: robot 1 at (11, 1)
+    in_sight = np.array([6.0, 4.0, 0.0])  # robot 1 at (7, 5): 2 m ahead of robot 0, unseen
+    far = np.array([14.0, 4.0, 0.0])  # robot 1 at (15, 5): out of the peer sensor's range
+    team.hypotheses = [driving, in_sight, far]
+    rendezvous = _Rendezvous(
+        hypothesis=driving, index=0, meeting_point=np.array([8.0, 5.0]), started=0
+    )
+    for _ in range(UNSEEN_STEPS - 1):
+        team._test_waiting(rendezvous, poses, lambda i: free)
+    assert not team.rejected
+    team._test_waiting(rendezvous, poses, lambda i: free)
+    assert len(team.rejected) == 1 and team.rejected[0] is in_sight
+    assert team.hypotheses_tested == 1
+    assert any("#1 rejected on the way to #0" in d.text for d in team.pop_decisions())
+    # Its turn never comes: the next rendezvous is for the one still untested.
+    team._last_poses = poses
+    team._meeting_point = lambda hypothesis, maps: (np.array([12.0, 5.0]), 3.0)  # type: ignore[method-assign]
+    team._start_rendezvous(1, lambda i: free)
+    assert team.rendezvous is not None and team.rendezvous.hypothesis is far
