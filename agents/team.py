@@ -200,6 +200,14 @@ def distinct_hypotheses(
     return kept
 
 
+def _either_in_sight(poses: list[FloatArray], predicted: FloatArray, maps: MapSource) -> bool:
+    """Whether either robot would have the other in plain sight, each judged on its own
+    map, given robot 1's ``predicted`` pose in robot 0's body frame."""
+    return in_plain_sight(poses[0], predicted, maps(0)) or in_plain_sight(
+        poses[1], inverse(predicted), maps(1)
+    )
+
+
 class TeamCoordinator:
     """Drives two :class:`~agents.explorer.ExplorerPolicy` robots through the four kinds of
     interaction.
@@ -483,10 +491,7 @@ class TeamCoordinator:
                 break
             else:
                 # Nobody seen: does the hypothesis put the other robot in plain sight?
-                if rendezvous.first_match is None and (
-                    in_plain_sight(poses[0], predicted, maps(0))
-                    or in_plain_sight(poses[1], inverse(predicted), maps(1))
-                ):
+                if rendezvous.first_match is None and _either_in_sight(poses, predicted, maps):
                     rendezvous.unseen += 1
                     if rendezvous.unseen >= UNSEEN_STEPS:
                         self._reject(
@@ -534,10 +539,7 @@ class TeamCoordinator:
             if any(hypothesis is rejected for rejected in self.rejected):
                 continue
             predicted = predicted_relative_pose(poses[0], poses[1], hypothesis)
-            if not (
-                in_plain_sight(poses[0], predicted, maps(0))
-                or in_plain_sight(poses[1], inverse(predicted), maps(1))
-            ):
+            if not _either_in_sight(poses, predicted, maps):
                 rendezvous.others_unseen[index] = 0
                 continue
             unseen = rendezvous.others_unseen.get(index, 0) + 1
