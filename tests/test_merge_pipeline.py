@@ -151,8 +151,10 @@ def test_result_reports_ranked_hypotheses_and_timings(overlapping: MergedPair) -
     for hypothesis in result.hypotheses:
         assert 0.0 <= hypothesis.acceptance_index <= 1.0
         assert 0.0 <= hypothesis.overlap <= 1.0
-        # Symmetry proposals (the aliasing check) come from no virtual run.
-        assert hypothesis.votes >= 1 or hypothesis.proposed_by == "symmetry"
+        # Symmetry proposals (the aliasing check) and wall-correlation placements come
+        # from no virtual run.
+        assert (hypothesis.votes >= 1) == (hypothesis.proposed_by == "virtual robot")
+        assert hypothesis.proposed_by in ("virtual robot", "correlation", "symmetry")
         assert hypothesis.map1_from_map2.shape == (3,)
     assert result.agreement is not None and result.agreement.index >= 0.9
     assert {"prepare", "hypotheses", "judge", "fuse", "total"} <= set(result.seconds)

@@ -13,6 +13,13 @@ and counts the distinct runs that voted for each. Each pooled hypothesis is then
 against **all** runs' scans (:func:`scan_agreement`): the fraction of beam endpoints that
 land on m2's walls (support) and of those that land in m2's known free space far from any
 wall (contradiction). The ranking combines both with the votes.
+
+A second, cheap proposal source, not in the paper: :func:`correlation_hypotheses` lines up
+the two maps' wall orientations (:func:`relative_rotations`) and, for each such rotation,
+scores every translation at once by FFT (:func:`placement_scores`). It finds small
+overlaps that no short virtual run both crosses and converges on; being an exhaustive
+search it also finds chance fits, so ``merge_maps`` accepts its placements under a stricter
+overlap rule.
 """
 
 from __future__ import annotations
@@ -24,6 +31,7 @@ from dataclasses import dataclass, field, replace
 import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy import fft as scipy_fft
 from scipy import ndimage
 
 from mrslam_env.geometry import compose, inverse, transform_points, wrap_angle
@@ -40,15 +48,41 @@ from mrslam_env.merge.virtual import VirtualRobotConfig, VirtualRun, virtual_rob
 FloatArray = NDArray[np.float64]
 
 __all__ = [
+    "CorrelationConfig",
     "Hypothesis",
     "HypothesisConfig",
     "HypothesisSet",
     "cluster_hypotheses",
+    "correlation_hypotheses",
     "generate_hypotheses",
+    "placement_scores",
     "pool_hypotheses",
     "relative_pose",
+    "relative_rotations",
     "scan_agreement",
+    "wall_orientation_histogram",
 ]
+
+
+def _check_fields(
+    config: object,
+    *,
+    positive: tuple[str, ...] = (),
+    non_negative: tuple[str, ...] = (),
+    counts: tuple[str, ...] = (),
+) -> None:
+    """Validate a config's fields: finite numbers > 0, finite numbers >= 0, ints >= 1."""
+    name = type(config).__name__
+    for attr in positive + non_negative:
+        value = getattr(config, attr)
+        number = isinstance(value, int | float) and math.isfinite(value)
+        if not (number and (value > 0 if attr in positive else value >= 0)):
+            bound = "> 0" if attr in positive else ">= 0"
+            raise ValueError(f"{name}.{attr} must be a finite number {bound}, got {value!r}")
+    for attr in counts:
+        value = getattr(config, attr)
+        if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+            raise ValueError(f"{name}.{attr} must be an int >= 1, got {value!r}")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -73,23 +107,17 @@ class HypothesisConfig:
 
     def __post_init__(self) -> None:
         name = type(self).__name__
-        for attr in (
-            "translation_tolerance",
-            "rotation_tolerance",
-            "hit_distance",
-            "miss_distance",
-        ):
-            value = getattr(self, attr)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name}.{attr} must be a finite number > 0, got {value!r}")
-        value = self.contradiction_weight
-        if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
-            raise ValueError(
-                f"{name}.contradiction_weight must be a finite number >= 0, got {value!r}"
-            )
-        value = self.max_hypotheses
-        if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
-            raise ValueError(f"{name}.max_hypotheses must be an int >= 1, got {value!r}")
+        _check_fields(
+            self,
+            positive=(
+                "translation_tolerance",
+                "rotation_tolerance",
+                "hit_distance",
+                "miss_distance",
+            ),
+            non_negative=("contradiction_weight",),
+            counts=("max_hypotheses",),
+        )
         if self.miss_distance < self.hit_distance:
             raise ValueError(
                 f"{name}.miss_distance must be >= hit_distance ({self.hit_distance}), "
@@ -499,3 +527,300 @@ def generate_hypotheses(
         timings=timings,
         mcl_results=results,
     )
+
+
+# --- a second proposal source: wall correlation over the rotations the walls allow ----------
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CorrelationConfig:
+    """The correlation proposal source (:func:`correlation_hypotheses`).
+
+    The virtual robot proposes a transform only when one of its short runs passes through
+    the shared part *and* its particle filter converges there; on small overlaps in
+    repetitive buildings that often fails although the true placement is plain to see. A
+    coarse, exhaustive search over translations is cheap by FFT once the rotation is known,
+    and the walls of a building tell the rotation up to their symmetry: the relative
+    rotation lines up the two maps' histograms of wall orientation.
+    """
+
+    orientation_peaks: int = 2
+    """Peaks of the wall-orientation cross-correlation (mod 180°) used; each gives two
+    rotations, theta and theta + 180°. Two peaks cover rectilinear buildings (theta and
+    theta + 90°)."""
+    peak_separation: float = math.radians(10.0)
+    """Two orientation peaks are at least this far apart, rad."""
+    orientation_smoothing: float = 0.3
+    """Standard deviation of the Gaussian smoothing of the walls before their orientation
+    is measured, m. Thin rasterised walls at a slant read as staircases whose gradients
+    lean towards the grid axes; on the benchmark pairs 1 cell of smoothing gave a median
+    rotation error of 1.6° (up to 6.7°), 3 cells 0.7° (up to 2.2°)."""
+    cell_factor: int = 2
+    """The correlation grid is this many times coarser than the maps."""
+    wall_sigma: float = 0.15
+    """Width of the wall likelihood ``exp(-d² / 2 sigma²)`` around map 1's walls, m."""
+    miss_distance: float = 0.3
+    """A wall of one map on free space of the other farther than this from any of its
+    walls contradicts, m."""
+    contradiction_weight: float = 2.0
+    """Score of a placement: wall likelihood summed over m2's walls, minus this weight
+    times the contradictions (both directions), in coarse cells."""
+    min_peak_distance: float = 1.0
+    """Two kept placements of one rotation are at least this far apart (non-maximum
+    suppression), m."""
+    max_hypotheses: int = 4
+    """At most this many placements are returned (best scores over all rotations)."""
+
+    def __post_init__(self) -> None:
+        _check_fields(
+            self,
+            positive=(
+                "peak_separation",
+                "orientation_smoothing",
+                "wall_sigma",
+                "miss_distance",
+                "min_peak_distance",
+            ),
+            non_negative=("contradiction_weight",),
+            counts=("orientation_peaks", "cell_factor", "max_hypotheses"),
+        )
+
+
+ORIENTATION_BINS = 180
+"""Bins of the wall-orientation histogram over [0, 180°) (1° each)."""
+
+
+def wall_orientation_histogram(
+    grid: GridMap, smoothing: float = 0.3, bins: int = ORIENTATION_BINS
+) -> FloatArray:
+    """Histogram of wall orientations (mod 180°), weighted by gradient magnitude.
+
+    The OCCUPIED mask is smoothed (Gaussian of standard deviation ``smoothing``, m) and
+    differentiated (Sobel); each
+    cell votes for the direction of its gradient, mod 180°, with the gradient's magnitude
+    (linear interpolation between the two nearest bins).
+
+    Returns
+    -------
+    ndarray of float64, shape (bins,)
+        Bin ``k`` covers ``[k, k + 1) * 180° / bins``; sums to 1 (all zeros without walls).
+    """
+    sigma_cells = smoothing / grid.resolution
+    occupied = ndimage.gaussian_filter(grid.occupied.astype(np.float64), sigma_cells)
+    gy = ndimage.sobel(occupied, axis=0)
+    gx = ndimage.sobel(occupied, axis=1)
+    magnitude = np.hypot(gx, gy).ravel()
+    keep = magnitude > 1e-3 * max(float(magnitude.max(initial=0.0)), 1e-12)
+    if not keep.any():
+        return np.zeros(bins)
+    position = (np.arctan2(gy.ravel()[keep], gx.ravel()[keep]) % math.pi) * bins / math.pi
+    lower = np.floor(position).astype(np.int64)
+    upper_share = position - lower
+    weights = magnitude[keep]
+    histogram = np.bincount(lower % bins, weights * (1.0 - upper_share), minlength=bins)
+    histogram += np.bincount((lower + 1) % bins, weights * upper_share, minlength=bins)
+    return histogram / histogram.sum()
+
+
+def relative_rotations(
+    histogram1: FloatArray, histogram2: FloatArray, peaks: int, separation: float
+) -> list[float]:
+    """Rotations (rad) of map 2 that line its wall orientations up with map 1's.
+
+    The circular cross-correlation ``c[k] = sum_j h1[j + k] h2[j]`` (mod 180°) is
+    searched for its ``peaks`` highest local maxima at least ``separation`` apart (each
+    refined by a parabola through its neighbours); each peak ``theta`` gives the two
+    rotations ``theta`` and ``theta + pi``, wrapped to [-pi, pi).
+    """
+    bins = len(histogram1)
+    spectrum = np.fft.rfft(histogram1) * np.conj(np.fft.rfft(histogram2))
+    correlation = np.fft.irfft(spectrum, n=bins)
+    bin_angle = math.pi / bins
+    order = np.argsort(-correlation, kind="stable")
+    chosen: list[float] = []
+    for k in order:
+        if len(chosen) >= peaks:
+            break
+        left, right = correlation[(k - 1) % bins], correlation[(k + 1) % bins]
+        if correlation[k] < left or correlation[k] < right:
+            continue
+        curvature = left - 2.0 * correlation[k] + right
+        offset = 0.5 * (left - right) / curvature if curvature < 0 else 0.0
+        angle = (k + offset) * bin_angle
+        if any(
+            abs(float(wrap_angle(2.0 * (angle - other)))) < 2.0 * separation for other in chosen
+        ):
+            continue
+        chosen.append(angle)
+    return [float(wrap_angle(a + half)) for a in chosen for half in (0.0, math.pi)]
+
+
+def _coarse_classes(
+    points_free: FloatArray, points_occupied: FloatArray, resolution: float
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_], FloatArray]:
+    """Occupied and free masks of points binned on a grid of ``resolution`` (occupied
+    wins a cell), and the grid's origin (x, y)."""
+    everything = np.concatenate([points_free, points_occupied])
+    origin = everything.min(axis=0) - 0.5 * resolution
+    extent = np.floor((everything.max(axis=0) - origin) / resolution).astype(np.int64) + 1
+    shape = (int(extent[1]), int(extent[0]))
+
+    def mask(points: FloatArray) -> NDArray[np.bool_]:
+        out = np.zeros(shape, dtype=bool)
+        cells = np.floor((points - origin) / resolution).astype(np.int64)
+        out[cells[:, 1], cells[:, 0]] = True
+        return out
+
+    occupied = mask(points_occupied)
+    free = mask(points_free) & ~occupied
+    return occupied, free, origin
+
+
+def _far_from_walls(
+    occupied: NDArray[np.bool_], free: NDArray[np.bool_], resolution: float, distance: float
+) -> tuple[NDArray[np.bool_], FloatArray]:
+    """Free cells farther than ``distance`` (m) from any occupied cell, and the distance
+    (m) of every cell to the nearest occupied cell."""
+    if occupied.any():
+        to_wall = ndimage.distance_transform_edt(~occupied) * resolution
+    else:
+        to_wall = np.full(occupied.shape, np.inf)
+    return free & (to_wall > distance), to_wall
+
+
+def placement_scores(
+    target1_spectrum: NDArray[np.complex128],
+    walls1_spectrum: NDArray[np.complex128],
+    walls2: NDArray[np.bool_],
+    far2: NDArray[np.bool_],
+    contradiction_weight: float,
+    shape: tuple[int, int],
+) -> FloatArray:
+    """Score of every translation of map 2's rotated grid over map 1's, by FFT.
+
+    ``score[s] = sum_p walls2[p] target1[p + s] - w * sum_p far2[p] walls1[p + s]`` for
+    every shift ``s = (rows, cols)``, where ``target1`` is map 1's wall likelihood minus
+    ``w`` on its free space far from walls, ``walls1`` its wall mask, ``walls2`` and
+    ``far2`` map 2's wall mask and free-far-from-walls mask, ``w`` the
+    ``contradiction_weight``. Out-of-grid cells count zero.
+
+    Parameters
+    ----------
+    target1_spectrum, walls1_spectrum : ndarray of complex128
+        ``scipy.fft.rfft2(target1, shape)`` and ``rfft2(walls1, shape)``.
+    walls2, far2 : ndarray of bool, shape (rows2, cols2)
+        Map 2's masks on the coarse grid, rotated.
+    contradiction_weight : float
+    shape : tuple of int
+        FFT shape, at least map 1's grid plus map 2's in each axis (no wrap-around).
+
+    Returns
+    -------
+    ndarray of float64, shape ``shape``
+        ``score[s]`` at index ``s mod shape`` (negative shifts at the end of each axis).
+    """
+    spectrum = np.conj(scipy_fft.rfft2(walls2.astype(np.float64), shape)) * target1_spectrum
+    spectrum -= contradiction_weight * (
+        np.conj(scipy_fft.rfft2(far2.astype(np.float64), shape)) * walls1_spectrum
+    )
+    return np.asarray(scipy_fft.irfft2(spectrum, shape), dtype=np.float64)
+
+
+def _local_maxima(score: FloatArray, radius_cells: int, count: int) -> list[tuple[int, int]]:
+    """Up to ``count`` highest local maxima of ``score`` (cells), at least
+    ``radius_cells`` apart (a maximum filter of that half-width)."""
+    size = 2 * radius_cells + 1
+    peaks = (score == ndimage.maximum_filter(score, size=size, mode="wrap")) & (score > 0)
+    rows, cols = np.nonzero(peaks)
+    order = np.argsort(-score[rows, cols], kind="stable")[:count]
+    return [(int(rows[i]), int(cols[i])) for i in order]
+
+
+def correlation_hypotheses(
+    m1: GridMap, m2: GridMap, config: CorrelationConfig | None = None
+) -> list[Hypothesis]:
+    """``map1_from_map2`` placements by correlating walls (a proposal source besides the
+    virtual robot).
+
+    For each rotation from :func:`relative_rotations`, map 2's cells are rotated and
+    binned on a grid ``cell_factor`` times coarser than the maps, and every translation is
+    scored at once by FFT cross-correlation: the wall likelihood of map 1 summed over map
+    2's walls, minus ``contradiction_weight`` times the walls of either map that fall on
+    the other's free space far from its walls. The best local maxima over all rotations
+    are returned. Deterministic.
+
+    Parameters
+    ----------
+    m1, m2 : GridMap
+        The maps, same resolution.
+    config : CorrelationConfig, optional
+
+    Returns
+    -------
+    list of Hypothesis
+        Best score first, at most ``max_hypotheses``; ``weight`` is the placement's score
+        divided by the best one's, ``votes`` 0 (no virtual run voted). Empty when a map has
+        no wall.
+    """
+    config = config or CorrelationConfig()
+    if not math.isclose(m1.resolution, m2.resolution, rel_tol=1e-6):
+        raise ValueError(
+            f"maps must have the same resolution, got {m1.resolution} m and {m2.resolution} m"
+        )
+    if not (m1.occupied.any() and m2.occupied.any()):
+        return []
+    resolution = m1.resolution * config.cell_factor
+    occupied1, free1, origin1 = _coarse_classes(
+        m1.cell_to_world(np.argwhere(m1.free)).reshape(-1, 2),
+        m1.cell_to_world(np.argwhere(m1.occupied)),
+        resolution,
+    )
+    far1, to_wall1 = _far_from_walls(occupied1, free1, resolution, config.miss_distance)
+    likelihood1 = np.exp(-0.5 * (to_wall1 / config.wall_sigma) ** 2)
+    target1 = likelihood1 - config.contradiction_weight * far1
+    free2 = m2.cell_to_world(np.argwhere(m2.free)).reshape(-1, 2)
+    occupied2 = m2.cell_to_world(np.argwhere(m2.occupied))
+    diagonal = math.ceil(math.hypot(*m2.shape) * m2.resolution / resolution) + 2
+    shape = (
+        int(scipy_fft.next_fast_len(occupied1.shape[0] + diagonal)),
+        int(scipy_fft.next_fast_len(occupied1.shape[1] + diagonal)),
+    )
+    spectrum_target1 = scipy_fft.rfft2(target1, shape)
+    spectrum_occupied1 = scipy_fft.rfft2(occupied1.astype(np.float64), shape)
+    radius = max(1, round(config.min_peak_distance / resolution))
+    found: list[tuple[float, FloatArray]] = []
+    histogram1 = wall_orientation_histogram(m1, config.orientation_smoothing)
+    histogram2 = wall_orientation_histogram(m2, config.orientation_smoothing)
+    for theta in relative_rotations(
+        histogram1, histogram2, config.orientation_peaks, config.peak_separation
+    ):
+        rotation = np.array([0.0, 0.0, theta])
+        occupied2r, free2r, origin2 = _coarse_classes(
+            transform_points(rotation, free2).reshape(-1, 2),
+            transform_points(rotation, occupied2),
+            resolution,
+        )
+        far2, _ = _far_from_walls(occupied2r, free2r, resolution, config.miss_distance)
+        score = placement_scores(
+            spectrum_target1,
+            spectrum_occupied1,
+            occupied2r,
+            far2,
+            config.contradiction_weight,
+            shape,
+        )
+        for row, col in _local_maxima(score, radius, config.max_hypotheses):
+            shift_row = row if row < shape[0] - diagonal else row - shape[0]
+            shift_col = col if col < shape[1] - diagonal else col - shape[1]
+            translation = origin1 - origin2 + resolution * np.array([shift_col, shift_row])
+            found.append(
+                (float(score[row, col]), np.array([translation[0], translation[1], theta]))
+            )
+    found.sort(key=lambda item: -item[0])
+    if not found:
+        return []
+    best = found[0][0]
+    return [
+        Hypothesis(map1_from_map2=transform, weight=value / best, votes=0)
+        for value, transform in found[: config.max_hypotheses]
+    ]
