@@ -248,9 +248,6 @@ class TeamCoordinator:
         wrong and are not tried again."""
         self.hypotheses_tested = 0
         self.step_verified: int | None = None
-        self.merged_map: GridMap | None = None
-        """Robot 0's view of the merged map (its own map and robot 1's as last received),
-        in map 0's frame; robot 1 explores :attr:`views` ``[1]``."""
         self.views: list[GridMap | None] = [None, None]
         """Per robot, the merged map it explores, in map 0's frame: its own map, current,
         fused with the other robot's as it last received it. The two are one map while
@@ -275,6 +272,12 @@ class TeamCoordinator:
         link (coordinated exploration)."""
 
     # --- what recording reads -----------------------------------------------------------
+
+    @property
+    def merged_map(self) -> GridMap | None:
+        """Robot 0's view of the merged map (its own map and robot 1's as last received),
+        in map 0's frame, or None before a merge; robot 1 explores :attr:`views` ``[1]``."""
+        return self.views[0]
 
     @property
     def rendezvous_point(self) -> FloatArray | None:
@@ -659,7 +662,6 @@ class TeamCoordinator:
                 m1 = resample_map(m1, m0.resolution)
             views.append(fuse_maps(m0, m1, self.transform))
         self.views = [views[0], views[-1]]
-        self.merged_map = views[0]
         self._last_merge_step = self.step
 
     def _act_coordinated(self, observations: list[dict[str, Any]]) -> list[NDArray[np.float32]]:
