@@ -186,8 +186,12 @@ class PairGenerationConfig:
             )
 
     def cache_key(self) -> str:
-        """Folder name of this configuration's cached pairs."""
-        text = json.dumps({"version": GENERATOR_VERSION, **asdict(self)}, sort_keys=True)
+        """Folder name of this configuration's cached pairs (the onboard SLAM's defaults are
+        part of it: maps made by another SLAM are other pairs)."""
+        slam = asdict(SlamConfig())
+        text = json.dumps(
+            {"version": GENERATOR_VERSION, "slam": slam, **asdict(self)}, sort_keys=True
+        )
         digest = hashlib.sha1(text.encode()).hexdigest()[:10]
         return f"v{GENERATOR_VERSION}-n{self.n_pairs}-seed{self.seed}-{digest}"
 

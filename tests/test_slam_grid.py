@@ -23,7 +23,9 @@ from mrslam_env.slam.evaluation import map_agreement
 from mrslam_env.slam.grid import (
     HIT_AVERAGE_CAP,
     KERNEL_SCALE,
+    PROVISIONAL,
     SECTORS,
+    SUBCELL_POINTS,
     SUBCELLS,
     OccupancyGrid,
     facing_sectors,
@@ -90,20 +92,21 @@ def assert_fields_consistent(grid: OccupancyGrid) -> None:
 # --- kernels and sectors ------------------------------------------------------------------
 
 
-def test_kernels_are_integer_gaussians_centred_on_their_subcell() -> None:
+def test_kernels_are_integer_gaussians_centred_on_their_lattice_point() -> None:
     kernels, line_sum = gaussian_kernels(0.05, 0.05)
-    assert kernels.shape[0] == SUBCELLS**2
+    assert kernels.shape[0] == SUBCELL_POINTS**2
     assert np.all(kernels == np.round(kernels)) and kernels.max() <= KERNEL_SCALE
     radius = kernels.shape[1] // 2
     offsets = np.arange(-radius, radius + 1)
-    for q in range(SUBCELLS**2):
+    for q in range(SUBCELL_POINTS**2):
         weights = kernels[q].astype(np.float64)
         centre_x = (weights.sum(axis=0) @ offsets) / weights.sum()
         centre_y = (weights.sum(axis=1) @ offsets) / weights.sum()
-        expected = (np.array([q % SUBCELLS, q // SUBCELLS]) + 0.5) / SUBCELLS - 0.5
+        expected = np.array([q % SUBCELL_POINTS, q // SUBCELL_POINTS]) / SUBCELLS - 0.5
         np.testing.assert_allclose([centre_x, centre_y], expected, atol=0.03)
     # A straight wall (a long row of stamps) scores about 1 after dividing by line_sum.
-    row = sum(kernels[5][:, k] for k in range(kernels.shape[2]))
+    centre = SUBCELLS // 2 * SUBCELL_POINTS + SUBCELLS // 2  # the kernel at the cell centre
+    row = sum(kernels[centre][:, k] for k in range(kernels.shape[2]))
     assert row.max() / line_sum == pytest.approx(1.0, abs=0.05)
 
 
@@ -180,12 +183,13 @@ def reference_integrate(
             min(float(log_odds[iy, ix]) + config.log_odds_hit, config.log_odds_max)
         )
         if log_odds[iy, ix] > config.occupied_threshold:
-            facing = (
-                heading + math.atan2(normals[i, 1], normals[i, 0])
-                if normals[i].any()
-                else a + math.pi
-            )
-            masks[iy, ix] |= facing_sectors(facing)
+            if normals[i].any():
+                facing = heading + math.atan2(normals[i, 1], normals[i, 0])
+                if masks[iy, ix] & PROVISIONAL:
+                    masks[iy, ix] = 0  # the first real normal replaces the guess
+                masks[iy, ix] |= facing_sectors(facing)
+            elif not masks[iy, ix]:
+                masks[iy, ix] = facing_sectors(a + math.pi) | PROVISIONAL
 
 
 def test_integration_matches_the_slow_reference() -> None:
@@ -220,8 +224,8 @@ def test_integration_matches_the_slow_reference() -> None:
         assert grid.known_cells == known.sum(), f"step {step}"
         expected_index = np.where(
             log_odds > config.occupied_threshold,
-            np.minimum((hit_mean[..., 1] * SUBCELLS).astype(int), SUBCELLS - 1) * SUBCELLS
-            + np.minimum((hit_mean[..., 0] * SUBCELLS).astype(int), SUBCELLS - 1),
+            np.clip(np.round(hit_mean[..., 1] * SUBCELLS), 0, SUBCELLS).astype(int) * SUBCELL_POINTS
+            + np.clip(np.round(hit_mean[..., 0] * SUBCELLS), 0, SUBCELLS).astype(int),
             -1,
         )
         np.testing.assert_array_equal(grid.stamp_index, expected_index)

@@ -97,7 +97,12 @@ def test_ground_truth_mode_uses_the_true_pose() -> None:
 def test_motion_filter_integrates_only_after_enough_motion() -> None:
     rng = np.random.default_rng(2)
     world = room_world()
-    config = SlamConfig(min_translation=0.1, min_rotation=math.radians(5))
+    config = SlamConfig(
+        min_translation=0.1,
+        min_rotation=math.radians(5),
+        map_update_translation=0.1,
+        map_update_rotation=math.radians(5),
+    )
     slam = RobotSlam(config, 360, 8.0)
     start = np.array([1.5, 1.0, 0.0])
     slam.update([0.0, 0.0, 0.0], noisy_scan(world, start, rng))
@@ -113,6 +118,26 @@ def test_motion_filter_integrates_only_after_enough_motion() -> None:
         [0.12, 0.0, 0.1], noisy_scan(world, start + np.array([0.12, 0, 0.1]), rng)
     )  # a turn
     assert slam.n_integrated == 3
+
+
+def test_scans_between_map_updates_are_matched_but_not_integrated() -> None:
+    rng = np.random.default_rng(3)
+    world = room_world()
+    config = SlamConfig(map_update_translation=0.25, map_update_rotation=math.radians(20))
+    slam = RobotSlam(config, 360, 8.0)
+    start = np.array([1.5, 1.0, 0.0])
+    slam.update([0.0, 0.0, 0.0], noisy_scan(world, start, rng))
+    # Odometry overshoots by 2 cm a step; the matches must correct it every step, while the
+    # map is left alone until the robot is 0.25 m from where it last integrated a scan.
+    for k in range(1, 8):
+        truth = np.array([0.1 * k, 0.0, 0.0])
+        odom = np.array([0.12 * k, 0.0, 0.0])
+        pose = slam.update(odom, noisy_scan(world, start + truth, rng))
+        assert slam.last_match is not None and slam.last_match.accepted
+        np.testing.assert_allclose(pose[:2], truth[:2], atol=0.01)
+        assert slam.n_integrated == 1 + (k >= 3) + (k >= 6), k
+    slam.update([0.84, 0.0, 0.4], noisy_scan(world, start + np.array([0.7, 0.0, 0.4]), rng))
+    assert slam.n_integrated == 4  # a 23 degree turn
 
 
 def test_inputs_are_validated() -> None:
@@ -181,9 +206,9 @@ def test_slam_in_a_featureless_corridor_follows_odometry_along_it() -> None:
     slam = RobotSlam(SlamConfig(), 360, 8.0)
     matched = []
     for pose, odom in zip(path, odometry, strict=True):
-        before = slam.n_integrated
+        before = slam.n_matched - slam.n_rejected
         slam.update(odom, noisy_scan(world, pose, rng))
-        matched.append(slam.n_integrated > before)
+        matched.append(slam.n_matched - slam.n_rejected > before)
     assert sum(matched) > 40
     # In the world frame (the map frame is the start pose), x runs along the corridor.
     estimate = compose(path[0], slam.trajectory)

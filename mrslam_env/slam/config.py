@@ -236,10 +236,17 @@ class SlamConfig:
     matcher: MatcherConfig = field(default_factory=MatcherConfig)
     """Scan-to-map matching (used in ``slam`` mode)."""
     min_translation: float = 0.05
-    """Motion filter: a scan is matched and integrated only after the robot has moved
-    this far since the last integrated scan, m ..."""
+    """Motion filter: a scan is matched at all only after the robot has moved
+    this far since the last matched scan, m ..."""
     min_rotation: float = math.radians(2.0)
     """... or turned this much, rad; in between, the pose follows odometry."""
+    map_update_translation: float = 0.05
+    """A matched scan is integrated into the map only once the robot has moved this far
+    since the last integrated scan, m ...; scans in between are matched (they give the
+    pose) but leave the map alone. Every integration adds its pose error to the map, which
+    later matches inherit, so fewer integrations drift less."""
+    map_update_rotation: float = math.radians(2.0)
+    """... or turned this much, rad."""
     integrate_rejected_after: int = 10
     """A scan whose match is rejected is not integrated (the pose follows odometry), unless
     this many matches in a row have been rejected: then it is integrated at the odometry
@@ -249,7 +256,9 @@ class SlamConfig:
         _require(
             type(self).__name__, "mode", self.mode, self.mode in SLAM_MODES, f"one of {SLAM_MODES}"
         )
-        _non_negative(self, "min_translation", "min_rotation")
+        _non_negative(
+            self, "min_translation", "min_rotation", "map_update_translation", "map_update_rotation"
+        )
         _positive_int(self, "integrate_rejected_after")
         for name, cls in (("grid", GridConfig), ("matcher", MatcherConfig)):
             value = getattr(self, name)

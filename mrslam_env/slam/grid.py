@@ -19,8 +19,8 @@ refinements of the textbook model:
 
 **Likelihood fields.** The grid keeps the scan matcher's fields current. A field is a sum
 of integer-valued Gaussian kernels, one per OCCUPIED cell, centred not on the cell centre
-but on the cell's mean hit point (quantised to a quarter cell), so that a wall's ridge lies
-on its measured surface. Summing is linear: a cell that turns OCCUPIED adds its kernel, one
+but on the cell's mean hit point (rounded to an eighth of a cell, :data:`SUBCELLS`), so
+that a wall's ridge lies on its measured surface. Summing is linear: a cell that turns OCCUPIED adds its kernel, one
 that stops being OCCUPIED (or whose mean point moves) subtracts it again, and the float32
 sums stay exact. There are two kinds:
 
@@ -55,8 +55,10 @@ Float32Array = NDArray[np.float32]
 __all__ = [
     "HIT_AVERAGE_CAP",
     "KERNEL_SCALE",
+    "PROVISIONAL",
     "SECTORS",
     "SUBCELLS",
+    "SUBCELL_POINTS",
     "OccupancyGrid",
     "facing_sectors",
     "gaussian_kernels",
@@ -65,14 +67,34 @@ __all__ = [
     "sector_of",
 ]
 
-KERNEL_SCALE = 64.0
+KERNEL_SCALE = 1024.0
 """Peak weight of a likelihood-field kernel; weights are rounded to integers."""
 
-SUBCELLS = 4
-"""A cell's mean hit point is quantised to a SUBCELLS x SUBCELLS lattice in the cell."""
+SUBCELLS = 8
+"""A cell's mean hit point is rounded to the nearest point of a lattice with SUBCELLS steps
+per cell edge, edges included (``(SUBCELLS + 1)**2`` points, ``k / SUBCELLS`` for ``k = 0 ..
+SUBCELLS`` along each axis): at most 1/16 cell off, and exact on a cell edge. With points at
+the sub-cell centres instead, a wall lying on a cell edge (every wall of a lattice-built
+world seen from a lattice start) sits half a step behind its surface for good, and the
+matcher turns that bias into heading drift."""
+
+SUBCELL_POINTS = SUBCELLS + 1
+"""Lattice points per axis (see :data:`SUBCELLS`)."""
 
 SECTORS = 4
 """View sectors of the fine fields, centred on the directions ``k * 2 pi / SECTORS``."""
+
+PROVISIONAL = 1 << SECTORS
+"""Sector-mask flag: the cell's sectors come only from hits without a surface normal.
+
+A return without a normal (:func:`~mrslam_env.slam.scan.scan_normals` gives none where the
+neighbouring returns are too far apart, i.e. at grazing incidence) stands in the beam's
+reverse direction for the surface's facing, which at grazing incidence is up to 90° off.
+So such a hit picks the sectors only of a cell that has none yet, flagged provisional, and
+the first hit with a normal replaces them. Otherwise grazing hits would add a wrong sector
+to a wall for good, and in that sector the wall's field would blur into the other face of
+a thin wall (10 cm behind) or a neighbouring wall: a bias of centimetres across it, which
+the scan matcher turns into a steady heading drift."""
 
 HIT_AVERAGE_CAP = 1000
 """A cell's mean hit point is the mean of its hits since it last stopped being OCCUPIED,
@@ -91,9 +113,9 @@ def gaussian_kernels(sigma: float, resolution: float) -> tuple[Float32Array, flo
 
     Returns
     -------
-    kernels : ndarray, shape (SUBCELLS**2, 2k+1, 2k+1), float32
-        Kernel ``q = sy * SUBCELLS + sx`` is centred on the point ``((sx + 0.5) / SUBCELLS,
-        (sy + 0.5) / SUBCELLS)`` of its cell (cell units from the cell's corner) and holds
+    kernels : ndarray, shape (SUBCELL_POINTS**2, 2k+1, 2k+1), float32
+        Kernel ``q = sy * SUBCELL_POINTS + sx`` is centred on the point ``(sx / SUBCELLS,
+        sy / SUBCELLS)`` of its cell (cell units from the cell's corner) and holds
         ``round(KERNEL_SCALE * exp(-d^2 / (2 sigma^2)))``, ``d`` (m) from that point to the
         centres of the cells up to ``k = ceil(2 sigma / resolution + 0.5)`` cells away; index
         ``[q, k + dy, k + dx]``.
@@ -103,14 +125,15 @@ def gaussian_kernels(sigma: float, resolution: float) -> tuple[Float32Array, flo
     """
     radius = max(1, math.ceil(2.0 * sigma / resolution + 0.5))
     offsets = np.arange(-radius, radius + 1, dtype=np.float64)
-    sub = (np.arange(SUBCELLS) + 0.5) / SUBCELLS - 0.5  # sub-cell point minus cell centre
-    kernels = np.empty((SUBCELLS * SUBCELLS, 2 * radius + 1, 2 * radius + 1), np.float32)
-    for sy in range(SUBCELLS):
-        for sx in range(SUBCELLS):
+    sub = np.arange(SUBCELL_POINTS) / SUBCELLS - 0.5  # lattice point minus cell centre
+    size = 2 * radius + 1
+    kernels = np.empty((SUBCELL_POINTS * SUBCELL_POINTS, size, size), np.float32)
+    for sy in range(SUBCELL_POINTS):
+        for sx in range(SUBCELL_POINTS):
             dy = (offsets - sub[sy])[:, None] * resolution
             dx = (offsets - sub[sx])[None, :] * resolution
             weights = KERNEL_SCALE * np.exp(-(dx**2 + dy**2) / (2.0 * sigma**2))
-            kernels[sy * SUBCELLS + sx] = np.round(weights)
+            kernels[sy * SUBCELL_POINTS + sx] = np.round(weights)
     line_sum = KERNEL_SCALE * math.sqrt(2.0 * math.pi) * sigma / resolution
     return kernels, line_sum
 
@@ -284,11 +307,12 @@ def integrate_scan(
         The sub-cell kernel each cell adds to the fields, -1 for none; kept >= 0 exactly
         for the cells with log-odds above ``occupied_threshold``.
     sector_mask : ndarray, shape (rows, cols), uint8
-        The fine fields (bit k: sector k) an OCCUPIED cell adds its kernel to.
+        The fine fields (bit k: sector k) an OCCUPIED cell adds its kernel to, plus the
+        :data:`PROVISIONAL` flag.
     fine_fields : ndarray, shape (SECTORS, rows, cols), float32
     coarse_field : ndarray, shape (rows, cols), float32
         The likelihood fields: sums of the stamped kernels.
-    fine_kernels, coarse_kernels : ndarray, shape (SUBCELLS**2, K, K), float32
+    fine_kernels, coarse_kernels : ndarray, shape (SUBCELL_POINTS**2, K, K), float32
         From :func:`gaussian_kernels`.
     scan_id : int
     origin_x, origin_y, resolution : float
@@ -302,7 +326,7 @@ def integrate_scan(
         Sensor-facing surface normal of each return in the sensor frame
         (:func:`~mrslam_env.slam.scan.scan_normals`), ``(0, 0)`` where unknown: it picks
         the view sectors the hit counts in (the beam's reverse direction stands in for a
-        missing normal).
+        missing normal, provisionally: see :data:`PROVISIONAL`).
     max_range, min_range, no_return_clear_distance : float
         m.
     log_odds_hit, log_odds_miss, log_odds_min, log_odds_max : float
@@ -406,17 +430,19 @@ def integrate_scan(
             before, free_threshold, occupied_threshold
         )
         if after > occupied_threshold:
-            sub_x = min(int(mean_x * SUBCELLS), SUBCELLS - 1)
-            sub_y = min(int(mean_y * SUBCELLS), SUBCELLS - 1)
-            new_index = sub_y * SUBCELLS + sub_x
+            sub_x = min(max(round(mean_x * SUBCELLS), 0), SUBCELLS)
+            sub_y = min(max(round(mean_y * SUBCELLS), 0), SUBCELLS)
+            new_index = sub_y * SUBCELL_POINTS + sub_x
             old_index = stamp_index[iy, ix]
+            old_mask = int(sector_mask[iy, ix]) if old_index >= 0 else 0
             if normals[i, 0] != 0.0 or normals[i, 1] != 0.0:
-                facing = heading + math.atan2(normals[i, 1], normals[i, 0])
+                mask = facing_sectors(heading + math.atan2(normals[i, 1], normals[i, 0]))
+                if not old_mask & PROVISIONAL:
+                    mask |= old_mask
+            elif old_mask:
+                mask = old_mask
             else:
-                facing = a + math.pi
-            mask = facing_sectors(facing)
-            if old_index >= 0:
-                mask |= sector_mask[iy, ix]
+                mask = facing_sectors(a + math.pi) | PROVISIONAL
             if new_index != old_index or mask != sector_mask[iy, ix]:
                 if old_index < 0:
                     flips += 1
@@ -529,13 +555,14 @@ class OccupancyGrid:
 
     @property
     def stamp_index(self) -> NDArray[np.int8]:
-        """Per cell, the sub-cell kernel (``sy * SUBCELLS + sx``) it adds to the fields, -1
+        """Per cell, the sub-cell kernel (``sy * SUBCELL_POINTS + sx``) it adds to the fields, -1
         for cells that are not OCCUPIED; read-only."""
         return self._read_only(self._stamp_index)
 
     @property
     def sector_mask(self) -> NDArray[np.uint8]:
-        """Per OCCUPIED cell, the fine fields it counts in (bit k: sector k); read-only."""
+        """Per OCCUPIED cell, the fine fields it counts in (bit k: sector k), and the
+        :data:`PROVISIONAL` flag (bit ``SECTORS``); read-only."""
         return self._read_only(self._sector_mask)
 
     def probability(self) -> FloatArray:

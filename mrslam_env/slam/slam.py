@@ -9,13 +9,17 @@ Per update (``mode="slam"``):
 1. **Predict**: apply the odometry motion since the last integrated scan to the pose of that
    scan (``pose_k = pose_ref ∘ inverse(odom_ref) ∘ odom_k``).
 2. **Motion filter**: unless the robot has moved ``min_translation`` or turned
-   ``min_rotation`` since the last integrated scan, stop here (the prediction is the pose).
+   ``min_rotation`` since the last matched scan, stop here (the prediction is the pose).
 3. **Match** the scan to the map from the prediction
    (:func:`~mrslam_env.slam.matcher.match_scan`); if the match is rejected, keep the
    prediction (fall back to odometry) and do not integrate the scan, unless
    ``integrate_rejected_after`` matches in a row have failed (then mapping goes on with
    odometry, e.g. into an area the map does not cover yet).
-4. **Integrate** the scan at the resulting pose (:meth:`OccupancyGrid.integrate_scan`).
+4. **Integrate** the scan at the resulting pose (:meth:`OccupancyGrid.integrate_scan`),
+   but only once the robot has moved ``map_update_translation`` or turned
+   ``map_update_rotation`` since the last integrated scan: each integration writes its pose
+   error into the map, so integrating every few centimetres makes the map (and the
+   heading) drift faster. A scan matched but not integrated still sets the pose.
 
 ``mode="odometry"`` skips step 3 (the pose is the odometry itself) and
 ``mode="ground_truth"`` replaces steps 1–3 by the true pose (in the map frame) passed in.
@@ -94,12 +98,15 @@ class RobotSlam:
         self._pose = (0.0, 0.0, 0.0)
         self._reference_pose: tuple[float, float, float] | None = None
         self._reference_odom = (0.0, 0.0, 0.0)
+        self._mapped_pose = (0.0, 0.0, 0.0)
         self._trajectory = np.zeros((256, 3))
         self._length = 0
         self.last_match: MatchResult | None = None
         """The most recent match (``None`` before the first one, and in other modes)."""
         self.n_integrated = 0
         """Scans integrated so far."""
+        self.n_matched = 0
+        """Scans matched so far (accepted or not)."""
         self.n_rejected = 0
         """Matches rejected so far (the pose fell back to odometry)."""
         self._rejected_in_a_row = 0
@@ -193,6 +200,7 @@ class RobotSlam:
                 normals,
             )
             self.last_match = result
+            self.n_matched += 1
             pose = (float(result.pose[0]), float(result.pose[1]), float(result.pose[2]))
             if not result.accepted:
                 self.n_rejected += 1
@@ -202,6 +210,16 @@ class RobotSlam:
                     # into the map; keep the reference, so the next window is wider.
                     return self._record(pose)
             self._rejected_in_a_row = 0
+            moved = _relative(self._mapped_pose, pose)
+            if (
+                result.accepted
+                and math.hypot(moved[0], moved[1]) < self.config.map_update_translation
+                and abs(moved[2]) < self.config.map_update_rotation
+            ):
+                # Matched, but too close to the last integrated scan to be worth its error.
+                self._reference_pose = pose
+                self._reference_odom = odom
+                return self._record(pose)
         self._integrate(pose, odom, scan, normals)
         return self._record(pose)
 
@@ -213,6 +231,7 @@ class RobotSlam:
         normals: FloatArray | None = None,
     ) -> None:
         self.grid.integrate_scan(pose, scan, self.max_range, normals)
+        self._mapped_pose = pose
         self._reference_pose = pose
         self._reference_odom = odom
         self.n_integrated += 1
