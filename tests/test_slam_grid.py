@@ -9,6 +9,7 @@ mapped with true poses against the ground-truth raster.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from itertools import pairwise
 
 import numpy as np
@@ -27,11 +28,13 @@ from mrslam_env.slam.grid import (
     SECTORS,
     SUBCELL_POINTS,
     SUBCELLS,
+    SURFACE_ZONE_CELLS,
     OccupancyGrid,
     facing_sectors,
     gaussian_kernels,
     sector_of,
 )
+from mrslam_env.slam.matcher import interpolate
 from mrslam_env.slam.raycast import traverse
 from mrslam_env.slam.scan import scan_normals
 from mrslam_env.slam.slam import RobotSlam
@@ -82,8 +85,11 @@ def fields_from_scratch(grid: OccupancyGrid) -> tuple[np.ndarray, np.ndarray]:
 
 def assert_fields_consistent(grid: OccupancyGrid) -> None:
     occupied = grid.log_odds > grid.config.occupied_threshold
-    assert np.array_equal(grid.stamp_index >= 0, occupied)
-    assert np.all(grid.sector_mask[occupied] > 0)
+    surface = grid.stamp_index >= 0  # every OCCUPIED cell, and some the map cleared
+    assert np.array_equal(surface, grid._surface_odds > grid.config.occupied_threshold)
+    assert np.all(surface[occupied])
+    assert np.all(grid.sector_mask[surface] & (1 << SECTORS) - 1 > 0)
+    assert np.all(grid.sector_mask[~surface] == 0)
     fine, coarse = fields_from_scratch(grid)
     np.testing.assert_array_equal(grid.fine_fields, fine)
     np.testing.assert_array_equal(grid.coarse_field[0], coarse)
@@ -126,6 +132,7 @@ def test_sectors_overlap_by_a_quarter_sector_each_side() -> None:
 
 def reference_integrate(
     log_odds: np.ndarray,
+    surface: np.ndarray,
     hit_mean: np.ndarray,
     hit_count: np.ndarray,
     masks: np.ndarray,
@@ -149,6 +156,18 @@ def reference_integrate(
     def cell_of(px: float, py: float) -> tuple[int, int]:
         return math.floor((py - origin[1]) / resolution), math.floor((px - origin[0]) / resolution)
 
+    def entry_fraction(ex: float, ey: float, iy: int, ix: int) -> float:
+        """Where the beam (x, y)-(ex, ey) enters cell (iy, ix), as a fraction of it."""
+        t_in = 0.0
+        for start, delta, low in ((x, ex - x, origin[0] + ix * resolution),
+                                  (y, ey - y, origin[1] + iy * resolution)):  # fmt: skip
+            if delta != 0.0:
+                t_in = max(t_in, min((low - start) / delta, (low + resolution - start) / delta))
+        return t_in
+
+    def miss(value: np.float32) -> np.float32:
+        return np.float32(max(float(value) + config.log_odds_miss, config.log_odds_min))
+
     returned = (ranges >= config.min_range) & (ranges < max_range)
     hit_cells = {cell_of(*end_point(i, ranges[i])[:2]) for i in np.flatnonzero(returned)}
     clear = min(config.no_return_clear_distance, max_range)
@@ -156,21 +175,35 @@ def reference_integrate(
         if ranges[i] < config.min_range:
             continue
         length = ranges[i] if returned[i] else clear
-        ex, ey, _ = end_point(i, length)
+        ex, ey, a = end_point(i, length)
+        # The near-surface zone: the last stretch of a returning beam within
+        # surface_margin of its surface (across it), at most SURFACE_ZONE_CELLS cells.
+        zone_start = 2.0
+        if returned[i] and config.surface_margin > 0:
+            incidence = abs(normals[i] @ [math.cos(a - heading), math.sin(a - heading)])
+            along = SURFACE_ZONE_CELLS * resolution
+            if incidence * along > config.surface_margin:
+                along = config.surface_margin / incidence
+            zone_start = 1.0 - along / length
         count = traverse(x, y, ex, ey, origin[0], origin[1], resolution, buffer)
-        for iy, ix in buffer[:count]:
+        for k, (iy, ix) in enumerate(buffer[:count]):
             if (iy, ix) in hit_cells or (
                 not returned[i] and log_odds[iy, ix] > config.occupied_threshold
             ):
                 if returned[i]:
                     continue
                 break
-            log_odds[iy, ix] = np.float32(
-                min(max(float(log_odds[iy, ix]) + config.log_odds_miss, config.log_odds_min),
-                    config.log_odds_max)
-            )  # fmt: skip
-            if log_odds[iy, ix] <= config.occupied_threshold:
-                if masks[iy, ix]:
+            log_odds[iy, ix] = miss(log_odds[iy, ix])
+            near_surface = (
+                returned[i]
+                and hit_count[iy, ix] > 0
+                and (entry_fraction(ex, ey, iy, ix) if k > 0 else 0.0) >= zone_start
+            )
+            if near_surface:
+                continue  # the surface layer ignores it
+            surface[iy, ix] = miss(surface[iy, ix])
+            if surface[iy, ix] <= config.occupied_threshold:
+                if masks[iy, ix]:  # no longer a surface cell
                     hit_count[iy, ix] = 0
                 masks[iy, ix] = 0
     for i in np.flatnonzero(returned):
@@ -182,7 +215,10 @@ def reference_integrate(
         log_odds[iy, ix] = np.float32(
             min(float(log_odds[iy, ix]) + config.log_odds_hit, config.log_odds_max)
         )
-        if log_odds[iy, ix] > config.occupied_threshold:
+        surface[iy, ix] = np.float32(
+            min(float(surface[iy, ix]) + config.log_odds_hit, config.log_odds_max)
+        )
+        if surface[iy, ix] > config.occupied_threshold:
             if normals[i].any():
                 facing = heading + math.atan2(normals[i, 1], normals[i, 0])
                 if masks[iy, ix] & PROVISIONAL:
@@ -199,6 +235,7 @@ def test_integration_matches_the_slow_reference() -> None:
     grid = OccupancyGrid(config)
     grid.ensure_contains(-3.0, -3.0, 9.0, 7.0)
     log_odds = grid.log_odds.copy()
+    surface = grid._surface_odds.copy()
     hit_mean = grid._hit_mean.copy()
     hit_count = grid._hit_count.copy()
     masks = grid.sector_mask.copy()
@@ -211,19 +248,21 @@ def test_integration_matches_the_slow_reference() -> None:
         ranges[rng.random(360) < 0.02] = 0.01  # below min_range: skipped
         normals = scan_normals(ranges, 8.0, config.min_range)
         reference_integrate(
-            log_odds, hit_mean, hit_count, masks, grid.origin, grid.resolution, pose, ranges,
-            normals, 8.0, config,
+            log_odds, surface, hit_mean, hit_count, masks, grid.origin, grid.resolution, pose,
+            ranges, normals, 8.0, config,
         )  # fmt: skip
         grid.integrate_scan(pose, ranges, 8.0, normals)
         assert grid.shape == log_odds.shape, "the room fits: no growth expected"
         np.testing.assert_array_equal(grid.log_odds, log_odds, err_msg=f"step {step}")
+        np.testing.assert_array_equal(grid._surface_odds, surface, err_msg=f"step {step}")
+        assert np.all(surface >= log_odds)
         np.testing.assert_allclose(grid._hit_mean, hit_mean, atol=1e-6)
         np.testing.assert_array_equal(grid._hit_count, hit_count)
         np.testing.assert_array_equal(grid.sector_mask, masks)
         known = (log_odds < config.free_threshold) | (log_odds > config.occupied_threshold)
         assert grid.known_cells == known.sum(), f"step {step}"
         expected_index = np.where(
-            log_odds > config.occupied_threshold,
+            surface > config.occupied_threshold,
             np.clip(np.round(hit_mean[..., 1] * SUBCELLS), 0, SUBCELLS).astype(int) * SUBCELL_POINTS
             + np.clip(np.round(hit_mean[..., 0] * SUBCELLS), 0, SUBCELLS).astype(int),
             -1,
@@ -333,3 +372,42 @@ def test_box_room_mapped_with_true_poses_matches_the_ground_truth() -> None:
     assert map_agreement(gridmap, start, raster) >= 0.97
     # The same map placed wrongly (a 0.3 m shift) must not pass: the check can fail.
     assert map_agreement(gridmap, start + np.array([0.3, 0.0, 0.0]), raster) < 0.96
+
+
+def test_a_wall_on_a_cell_edge_keeps_its_ridge_on_its_surface() -> None:
+    # Range noise splits the hits on a wall lying on a cell edge between two rows of cells;
+    # without surface_margin the beams clear the front row and the ridge sinks behind the
+    # surface (each row's mean hit point is the noise's half on its side of the edge).
+    world = WorldSpec.from_walls(
+        "room", [box(-0.1, -0.1, 8.1, 0.0), box(-0.1, 5.0, 8.1, 5.1), box(-0.1, 0.0, 0.0, 5.0),
+                 box(8.0, 0.0, 8.1, 5.0)], [[1.5, 1.0, 0.0]],
+    )  # fmt: skip
+    poses = [
+        np.array([x, 1.0 + 0.3 * math.sin(x), 0.2 * math.cos(2.0 * x)])
+        for x in np.linspace(1.5, 6.0, 40)
+    ]
+    along = np.arange(1.0, 6.0, 0.1)
+    across = np.arange(-0.02, 0.02, 0.0002)
+
+    def ridge_offsets(config: GridConfig) -> np.ndarray:
+        rng = np.random.default_rng(0)
+        grid = OccupancyGrid(config)
+        for pose in poses:
+            grid.integrate_scan(pose, noisy_scan(world, pose, rng), 8.0)
+        ox, oy = grid.origin
+        sector = sector_of(math.pi / 2.0)  # the south wall's face y = 0 faces +y
+        offsets = []
+        for x in along:
+            gx = (x - ox) / grid.resolution - 0.5
+            values = [
+                interpolate(
+                    grid.fine_fields, sector, grid.fine_scale, gx, (y - oy) / grid.resolution - 0.5
+                )[0]
+                for y in across
+            ]
+            offsets.append(across[int(np.argmax(values))])
+        return np.array(offsets)
+
+    offsets = ridge_offsets(GridConfig())
+    assert abs(offsets.mean()) < 0.001 and np.abs(offsets).max() < 0.0025
+    assert ridge_offsets(replace(GridConfig(), surface_margin=0.0)).mean() < -0.003

@@ -18,10 +18,18 @@ refinements of the textbook model:
   the wall is gone.
 
 **Likelihood fields.** The grid keeps the scan matcher's fields current. A field is a sum
-of integer-valued Gaussian kernels, one per OCCUPIED cell, centred not on the cell centre
+of integer-valued Gaussian kernels, one per *surface cell*, centred not on the cell centre
 but on the cell's mean hit point (rounded to an eighth of a cell, :data:`SUBCELLS`), so
-that a wall's ridge lies on its measured surface. Summing is linear: a cell that turns OCCUPIED adds its kernel, one
-that stops being OCCUPIED (or whose mean point moves) subtracts it again, and the float32
+that a wall's ridge lies on its measured surface. The surface cells are those OCCUPIED in
+a second log-odds layer that takes the same updates except the misses *near the surface*
+a beam ends on (within ``surface_margin`` of it, see
+:class:`~mrslam_env.slam.config.GridConfig`): range noise splits the hits on a wall that
+lies near a cell edge between two rows of cells, and the beams ending on the wall clear
+the front row; without its kernel, the back row's mean hit point (the noise's far half)
+would put the ridge millimetres behind the surface, and the matcher would turn that into
+heading drift. The map itself (the first layer) still clears the front row, so walls do
+not grow thicker. Summing is linear: a cell that becomes a surface cell adds its kernel,
+one that stops being one (or whose mean point moves) subtracts it again, and the float32
 sums stay exact. There are two kinds:
 
 * the *coarse* field (``coarse_sigma``), one for all cells, for the coarse search;
@@ -95,6 +103,9 @@ the first hit with a normal replaces them. Otherwise grazing hits would add a wr
 to a wall for good, and in that sector the wall's field would blur into the other face of
 a thin wall (10 cm behind) or a neighbouring wall: a bias of centimetres across it, which
 the scan matcher turns into a steady heading drift."""
+
+SURFACE_ZONE_CELLS = 4
+"""Cap, in cells along the beam, on the near-surface zone of ``surface_margin``."""
 
 HIT_AVERAGE_CAP = 1000
 """A cell's mean hit point is the mean of its hits since it last stopped being OCCUPIED,
@@ -260,6 +271,7 @@ def scan_extent(
 @numba.njit(cache=True)
 def integrate_scan(
     log_odds: Float32Array,
+    surface_odds: Float32Array,
     hit_marks: NDArray[np.int32],
     hit_mean: Float32Array,
     hit_count: NDArray[np.int32],
@@ -287,6 +299,7 @@ def integrate_scan(
     log_odds_max: float,
     occupied_threshold: float,
     free_threshold: float,
+    surface_margin: float,
 ) -> tuple[int, int]:
     """Integrate one scan into a log-odds grid and its likelihood fields (in place).
 
@@ -294,6 +307,10 @@ def integrate_scan(
     ----------
     log_odds : ndarray, shape (rows, cols), float32
         The grid.
+    surface_odds : ndarray, shape (rows, cols), float32
+        The surface layer: log-odds updated like ``log_odds`` except for the misses near
+        the surface a beam ends on (``surface_margin``); the cells where it exceeds
+        ``occupied_threshold`` are the surface cells, which carry the kernels.
     hit_marks : ndarray, shape (rows, cols), int32
         Scratch: cells ending a beam of this scan are set to ``scan_id``, which must differ
         from every value already in it (the caller counts scans up from 1).
@@ -302,12 +319,12 @@ def integrate_scan(
         from the cell's corner (in [0, 1)).
     hit_count : ndarray, shape (rows, cols), int32
         Hits in that mean (capped at ``HIT_AVERAGE_CAP``); reset to 0 when the cell stops
-        being OCCUPIED, so that the mean starts afresh.
+        being a surface cell, so that the mean starts afresh.
     stamp_index : ndarray, shape (rows, cols), int8
-        The sub-cell kernel each cell adds to the fields, -1 for none; kept >= 0 exactly
-        for the cells with log-odds above ``occupied_threshold``.
+        The sub-cell kernel each cell adds to the fields, -1 for none: >= 0 exactly for the
+        surface cells (``surface_odds`` above ``occupied_threshold``).
     sector_mask : ndarray, shape (rows, cols), uint8
-        The fine fields (bit k: sector k) an OCCUPIED cell adds its kernel to, plus the
+        The fine fields (bit k: sector k) a surface cell adds its kernel to, plus the
         :data:`PROVISIONAL` flag.
     fine_fields : ndarray, shape (SECTORS, rows, cols), float32
     coarse_field : ndarray, shape (rows, cols), float32
@@ -333,6 +350,10 @@ def integrate_scan(
     occupied_threshold, free_threshold : float
         The update and the trinary thresholds (see
         :class:`~mrslam_env.slam.config.GridConfig`).
+    surface_margin : float
+        m: misses of a returning beam within this distance of the surface it ends on
+        (across the surface, from the return's normal; along the beam at most
+        ``SURFACE_ZONE_CELLS`` cells) leave ``surface_odds`` alone in cells that hold hits.
 
     Returns
     -------
@@ -368,36 +389,56 @@ def integrate_scan(
             if r <= 0.0:
                 continue
         a = heading - math.pi + i * dtheta
+        # Where the beam comes within surface_margin of the surface it ends on (as a
+        # fraction of the beam): its misses there leave the surface layer alone.
+        zone_start = 2.0
+        if returned and surface_margin > 0.0:
+            incidence = abs(normals[i, 0] * math.cos(i * dtheta - math.pi) +
+                            normals[i, 1] * math.sin(i * dtheta - math.pi))  # fmt: skip
+            along = SURFACE_ZONE_CELLS * resolution
+            if incidence * along > surface_margin:
+                along = surface_margin / incidence
+            zone_start = 1.0 - along / r
         # The same set-up as raycast.traverse, so both visit the very same cells.
         ix, iy, step_x, step_y, t_max_x, t_max_y, t_delta_x, t_delta_y, n_steps = dda_start(
             x, y, x + r * math.cos(a), y + r * math.sin(a), origin_x, origin_y, resolution
         )
+        t_entry = 0.0
         for k in range(n_steps + 1):
             if k > 0:
                 if t_max_x < t_max_y:
                     ix += step_x
+                    t_entry = t_max_x
                     t_max_x += t_delta_x
                 else:
                     iy += step_y
+                    t_entry = t_max_y
                     t_max_y += t_delta_y
             if not (0 <= iy < rows and 0 <= ix < cols):
                 continue
             before = log_odds[iy, ix]
+            surface_before = surface_odds[iy, ix]  # >= before: it misses fewer misses
+            near_surface = False
             if returned:
                 # Most cells a beam crosses are known free and clamped: a miss changes
                 # nothing there, so skip them before touching ``hit_marks``.
-                if before <= log_odds_min or hit_marks[iy, ix] == scan_id:
+                if surface_before <= log_odds_min or hit_marks[iy, ix] == scan_id:
                     continue
+                near_surface = t_entry >= zone_start and hit_count[iy, ix] > 0
             elif hit_marks[iy, ix] == scan_id or before > occupied_threshold:
                 break
-            elif before <= log_odds_min:
+            elif surface_before <= log_odds_min:
                 continue
             after = np.float32(max(before + log_odds_miss, log_odds_min))
             log_odds[iy, ix] = after
             newly_known += _is_known(after, free_threshold, occupied_threshold) - _is_known(
                 before, free_threshold, occupied_threshold
             )
-            if before > occupied_threshold >= after:
+            if near_surface:
+                continue  # the map clears the cell, the surface layer keeps it
+            surface_after = np.float32(max(surface_before + log_odds_miss, log_odds_min))
+            surface_odds[iy, ix] = surface_after
+            if surface_before > occupied_threshold >= surface_after:
                 _restamp(
                     fine_fields, coarse_field, fine_kernels, coarse_kernels, stamp_index,
                     sector_mask, iy, ix, -1, 0,
@@ -429,7 +470,11 @@ def integrate_scan(
         newly_known += _is_known(after, free_threshold, occupied_threshold) - _is_known(
             before, free_threshold, occupied_threshold
         )
-        if after > occupied_threshold:
+        surface_after = np.float32(
+            min(max(surface_odds[iy, ix] + log_odds_hit, log_odds_min), log_odds_max)
+        )
+        surface_odds[iy, ix] = surface_after
+        if surface_after > occupied_threshold:
             sub_x = min(max(round(mean_x * SUBCELLS), 0), SUBCELLS)
             sub_y = min(max(round(mean_y * SUBCELLS), 0), SUBCELLS)
             new_index = sub_y * SUBCELL_POINTS + sub_x
@@ -488,6 +533,7 @@ class OccupancyGrid:
         self._origin_index = (-chunk // 2, -chunk // 2)
         shape = (chunk, chunk)
         self._log_odds = np.zeros(shape, dtype=np.float32)
+        self._surface_odds = np.zeros(shape, dtype=np.float32)
         self._hit_marks = np.zeros(shape, dtype=np.int32)
         self._hit_mean = np.zeros((*shape, 2), dtype=np.float32)
         self._hit_count = np.zeros(shape, dtype=np.int32)
@@ -541,7 +587,7 @@ class OccupancyGrid:
     @property
     def fine_fields(self) -> Float32Array:
         """Fine likelihood fields (SECTORS, rows, cols), float32, read-only: per view
-        sector, the sum over the OCCUPIED cells hit from that sector of a Gaussian
+        sector, the sum over the surface cells hit from that sector of a Gaussian
         (``fine_sigma``) centred on the cell's mean hit point, sampled at cell centres;
         times :attr:`fine_scale` about 1 on a wall."""
         return self._read_only(self._fine_fields)
@@ -549,20 +595,20 @@ class OccupancyGrid:
     @property
     def coarse_field(self) -> Float32Array:
         """Coarse likelihood field (1, rows, cols), float32, read-only: as a fine field
-        with ``coarse_sigma`` over every OCCUPIED cell; times :attr:`coarse_scale` about 1
+        with ``coarse_sigma`` over every surface cell; times :attr:`coarse_scale` about 1
         on a wall."""
         return self._read_only(self._coarse_field)
 
     @property
     def stamp_index(self) -> NDArray[np.int8]:
-        """Per cell, the sub-cell kernel (``sy * SUBCELL_POINTS + sx``) it adds to the fields, -1
-        for cells that are not OCCUPIED; read-only."""
+        """Per cell, the kernel (``sy * SUBCELL_POINTS + sx``) it adds to the fields, -1
+        for cells that are not surface cells (see the module notes); read-only."""
         return self._read_only(self._stamp_index)
 
     @property
     def sector_mask(self) -> NDArray[np.uint8]:
-        """Per OCCUPIED cell, the fine fields it counts in (bit k: sector k), and the
-        :data:`PROVISIONAL` flag (bit ``SECTORS``); read-only."""
+        """Per surface cell (see the module notes), the fine fields it counts in (bit k:
+        sector k), and the :data:`PROVISIONAL` flag (bit ``SECTORS``); read-only."""
         return self._read_only(self._sector_mask)
 
     def probability(self) -> FloatArray:
@@ -618,6 +664,7 @@ class OccupancyGrid:
             return new
 
         self._log_odds = grown(self._log_odds)
+        self._surface_odds = grown(self._surface_odds)
         self._hit_marks = grown(self._hit_marks)
         self._hit_mean = grown(self._hit_mean)
         self._hit_count = grown(self._hit_count)
@@ -673,6 +720,7 @@ class OccupancyGrid:
         x0, y0 = self.origin
         flips, newly_known = integrate_scan(
             self._log_odds,
+            self._surface_odds,
             self._hit_marks,
             self._hit_mean,
             self._hit_count,
@@ -700,6 +748,7 @@ class OccupancyGrid:
             config.log_odds_max,
             config.occupied_threshold,
             config.free_threshold,
+            config.surface_margin,
         )
         self.known_cells += int(newly_known)
         return flips
