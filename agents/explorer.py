@@ -360,6 +360,7 @@ class ExplorerPolicy:
         self._teammate_targets = np.empty((0, 2))
         self._teammates = np.empty((0, 2))
         self._sighted_body = np.empty((0, 2))
+        self._sighted_in_map = np.empty((0, 2))
         self._replan_now = False
         self._empty_replans = 0
         self._stuck_seen = 0
@@ -500,6 +501,8 @@ class ExplorerPolicy:
         )[:3]
         peer = observation.get("peer")
         self._sighted_body = np.empty((0, 2)) if peer is None else sighted_positions(peer)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        self._sighted_in_map = pose[:2] + self._sighted_body @ np.array([[c, s], [-s, c]])
         self._remember_close_returns(observation.get("scan"), pose)
         reason = self._replan_reason(robot_map, pose)
         if reason:
@@ -563,7 +566,7 @@ class ExplorerPolicy:
         """The map with remembered close returns and teammates' footprints marked
         OCCUPIED (what the planner plans on)."""
         parts = [p for _, p in self._close_returns]
-        robots = self._teammates
+        robots = self._robots_in_the_way()
         if len(robots):
             radius_cells = self.config.planner.robot_radius / grid.resolution
             footprint = _disk_offsets(radius_cells) * grid.resolution
@@ -644,8 +647,18 @@ class ExplorerPolicy:
             return "periodic"
         return ""
 
+    def _robots_in_the_way(self) -> FloatArray:
+        """The robots planning passes round: the teammates whose positions are known
+        (after a merge); before that, while exploring, the robots the peer sensor sees
+        (two robots unaware of each other would otherwise meet head-on in a doorway and
+        push). Driving to a given goal (a rendezvous) plans through them."""
+        if len(self._teammates) or self._given_goal is not None:
+            return self._teammates
+        return self._sighted_in_map
+
     def _path_blocked(self, grid: GridMap) -> bool:
-        """Whether an OCCUPIED cell now lies within the blocked radius of the path ahead."""
+        """Whether an OCCUPIED cell, or a robot in the way, now lies within the blocked
+        radius of the path ahead."""
         path = self.follower.path
         if len(path) < 2:
             return False
@@ -665,7 +678,13 @@ class ExplorerPolicy:
         cells = cells.reshape(-1, 2)
         inside = grid.contains(cells)
         cells = cells[inside]
-        return bool(grid.occupied[cells[:, 0], cells[:, 1]].any())
+        if grid.occupied[cells[:, 0], cells[:, 1]].any():
+            return True
+        robots = self._robots_in_the_way() if not len(self._teammates) else np.empty((0, 2))
+        if len(robots) == 0:
+            return False
+        gaps = np.hypot(*(points[:, None, :] - robots[None, :, :]).transpose(2, 0, 1))
+        return bool(gaps.min() < 2.0 * self.config.planner.robot_radius + PEER_MARGIN)
 
     def _target_explored(self, grid: GridMap) -> bool:
         """Whether too few of the target frontier's cells are still FREE next to UNKNOWN."""

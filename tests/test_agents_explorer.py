@@ -310,3 +310,26 @@ def test_a_sighted_robot_is_not_remembered_as_an_obstacle() -> None:
         policy.set_goal([6.0, 4.0])
         policy.act({"pose": pose, "scan": np.full(360, 8.0), "peer": np.zeros((1, 4))}, grid)
         assert (np.abs(policy.plan[:, 1] - 4.0).max() < 0.05) == straight
+
+
+def test_while_exploring_a_sighted_robot_is_planned_round() -> None:
+    # Before a merge nobody knows where the other robot is in its own map, but the peer
+    # sensor sees it: two robots would otherwise meet head-on in a doorway and push.
+    grid = two_rooms()
+    grid.cells[40:60, 20] = OCCUPIED  # only the east doorway is left
+    pose = np.array([4.5, 2.5, 0.0])
+    policy = ExplorerPolicy(np.random.default_rng(0))
+    policy.act({"pose": pose, "peer": np.zeros((1, 4))}, grid)
+    assert policy.target is not None and policy.target[0] > 6.5
+    assert np.abs(policy.plan[:, 1] - 2.5).max() < 0.1  # straight to the doorway
+    robot = np.array([5.75, 2.5])  # 1.25 m dead ahead, facing us
+    policy.act({"pose": pose, "peer": np.array([[1.0, 1.25, 0.0, np.pi]])}, grid)
+    assert policy.last_replan_reason == "path_blocked"
+    samples = np.concatenate(
+        [np.linspace(a, b, 20) for a, b in zip(policy.plan[:-1], policy.plan[1:], strict=True)]
+    )
+    assert np.hypot(*(samples - robot).T).min() > 0.35, "the path passes round the robot"
+    # Driving to a given goal (a rendezvous) the robots mean to meet: no detour.
+    policy.set_goal([6.5, 2.5])
+    policy.act({"pose": pose, "peer": np.array([[1.0, 1.25, 0.0, np.pi]])}, grid)
+    assert np.abs(policy.plan[:, 1] - 2.5).max() < 0.1
