@@ -680,8 +680,9 @@ class ExplorerPolicy:
         cells = cells[inside]
         if grid.occupied[cells[:, 0], cells[:, 1]].any():
             return True
-        robots = self._robots_in_the_way() if not len(self._teammates) else np.empty((0, 2))
-        if len(robots) == 0:
+        # Known teammates are already in the grid planning sees; sighted robots are not.
+        robots = self._robots_in_the_way()
+        if len(robots) == 0 or len(self._teammates):
             return False
         gaps = np.hypot(*(points[:, None, :] - robots[None, :, :]).transpose(2, 0, 1))
         return bool(gaps.min() < 2.0 * self.config.planner.robot_radius + PEER_MARGIN)
