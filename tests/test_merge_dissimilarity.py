@@ -20,6 +20,8 @@ from merge_fixtures import map_pair
 from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.merge.dissimilarity import (
+    SIDE_BINS,
+    SIDE_DISTANCE_CAP,
     Agreement,
     DissimilarityConfig,
     acceptance_index,
@@ -54,12 +56,38 @@ def brute_force_l1(mask: np.ndarray, sentinel: int) -> np.ndarray:
     return distance.reshape(mask.shape)
 
 
+def wall_side(grid: GridMap, iy: int, ix: int) -> float | None:
+    """Direction (rad) of the sum of the offsets from an occupied cell to its free
+    8-neighbours, None if there is none (or they cancel)."""
+    sx = sy = 0
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            y, x = iy + dy, ix + dx
+            inside = 0 <= y < grid.shape[0] and 0 <= x < grid.shape[1]
+            if (dx or dy) and inside and grid.cells[y, x] == FREE:
+                sx, sy = sx + dx, sy + dy
+    return math.atan2(sy, sx) if (sx or sy) else None
+
+
+def side_bin(angle: float) -> int:
+    return math.floor(angle / (2 * math.pi / SIDE_BINS)) % SIDE_BINS
+
+
 def brute_force_psi(
-    m1: GridMap, m2: GridMap, map1_from_map2: np.ndarray, *, restrict: bool, stride=(1, 1)
+    m1: GridMap,
+    m2: GridMap,
+    map1_from_map2: np.ndarray,
+    *,
+    restrict: bool,
+    stride=(1, 1),
+    sides: bool = False,
 ) -> float:
     """Eq. 11–12 straight from the definition: for each class-c cell of one map, the L1
     distance (in cells, between integer cell indices, possibly outside the grid) from the
-    cell under its image to every class-c cell of the other map."""
+    cell under its image to every class-c cell of the other map. With ``sides``, an
+    occupied cell with a side only to the occupied cells whose side bin (in the other
+    map's frame) is within one of its own, or which have no side, and at most
+    SIDE_DISTANCE_CAP."""
 
     def directed(a: GridMap, b: GridMap, b_from_a: np.ndarray, free_stride: int):
         means, count = [], 0
@@ -70,17 +98,30 @@ def brute_force_psi(
             targets = b.world_to_cell(transform_points(b_from_a, a.cell_to_world(cells)))
             sources = np.argwhere(b.cells == value)
             if restrict:
-                inside = b.contains(targets)
-                targets = targets[inside]
-                targets = targets[b.cells[targets[:, 0], targets[:, 1]] != UNKNOWN]
+                keep = b.contains(targets)
+                keep[keep] = b.cells[targets[keep, 0], targets[keep, 1]] != UNKNOWN
+                cells, targets = cells[keep], targets[keep]
             count += len(targets)
             if len(targets) == 0:
                 continue
             if len(sources) == 0:
                 means.append(float(sum(b.shape)))
                 continue
-            d = np.abs(targets[:, None, :] - sources[None, :, :]).sum(axis=-1).min(axis=1)
-            means.append(float(d.mean()))
+            d = np.abs(targets[:, None, :] - sources[None, :, :]).sum(axis=-1)
+            nearest = d.min(axis=1)
+            if sides and value == OCCUPIED:
+                source_sides = [wall_side(b, *cell) for cell in sources]
+                for k, cell in enumerate(cells):
+                    side = wall_side(a, *cell)
+                    if side is None:
+                        continue
+                    want = side_bin(side + b_from_a[2])
+                    near = [
+                        other is None or (side_bin(other) - want) % SIDE_BINS in (0, 1, 7)
+                        for other in source_sides
+                    ]
+                    nearest[k] = min(d[k, near].min(initial=sum(b.shape)), SIDE_DISTANCE_CAP)
+            means.append(float(nearest.mean()))
         return sum(means), count
 
     forward, count1 = directed(m1, m2, inverse(map1_from_map2), stride[0])
@@ -156,7 +197,66 @@ def replace_min_overlap(config: DissimilarityConfig) -> DissimilarityConfig:
         restrict_to_overlap=config.restrict_to_overlap,
         max_free_cells=config.max_free_cells,
         min_overlap_cells=1,
+        wall_sides=config.wall_sides,
     )
+
+
+@pytest.mark.parametrize("restrict", [True, False])
+def test_psi_with_wall_sides_matches_the_definition(restrict: bool) -> None:
+    rng = np.random.default_rng(17)
+    config = DissimilarityConfig(
+        restrict_to_overlap=restrict, max_free_cells=10**9, min_overlap_cells=1, wall_sides=True
+    )
+    for _ in range(8):
+        m1 = random_grid(rng, (14, 19), p=(0.5, 0.3, 0.2), origin=(-0.95, -0.7))
+        m2 = random_grid(rng, (17, 12), p=(0.5, 0.3, 0.2), origin=(-0.6, -0.85))
+        transform = np.array([*rng.uniform(-0.5, 0.5, 2), rng.uniform(-np.pi, np.pi)])
+        expected = brute_force_psi(m1, m2, transform, restrict=restrict, sides=True)
+        plain = brute_force_psi(m1, m2, transform, restrict=restrict)
+        assert expected != pytest.approx(plain)  # the side test matters on these grids
+        got = dissimilarity(m1, m2, transform, config=config)
+        assert got == pytest.approx(expected, rel=1e-12, abs=1e-12)
+
+
+def thick_wall_pair(seen_from: str) -> GridMap:
+    """A wall 3 cells thick (0.05 m cells) below a corridor with a box in it. The map
+    knows the corridor and the side of the wall ``seen_from``, and of the wall only that
+    face. The right map saw half of the corridor's top wall a cell higher (the noise that
+    keeps psi above 0 at the truth)."""
+    cells = np.full((120, 120), UNKNOWN, dtype=np.int8)
+    cells[5:116, 10:111] = FREE
+    cells[116, 10:111] = OCCUPIED
+    cells[104:107, 30:33] = OCCUPIED
+    cells[5:100, 58:61] = OCCUPIED
+    if seen_from == "left":
+        cells[:100, 59:] = UNKNOWN
+    else:
+        cells[:100, :60] = UNKNOWN
+        cells[116, 60:111] = FREE
+        cells[117, 60:111] = OCCUPIED
+    return GridMap(cells=cells, resolution=0.05)
+
+
+def test_wall_sides_keep_a_wall_seen_from_its_two_sides_where_it_is() -> None:
+    """One map saw a thick wall's left face, the other its right face: plain psi is
+    least with the faces laid over each other (a wall's thickness off), psi with wall
+    sides at the truth."""
+    left, right = thick_wall_pair("left"), thick_wall_pair("right")
+    shifts = range(-4, 5)
+
+    def best_shift(config: DissimilarityConfig) -> int:
+        d1 = distance_maps(left, sides=config.wall_sides)
+        d2 = distance_maps(right, sides=config.wall_sides)
+        costs = [
+            dissimilarity(
+                left, right, [0.05 * k, 0.0, 0.0], distances1=d1, distances2=d2, config=config
+            )
+            for k in shifts
+        ]
+        return list(shifts)[int(np.argmin(costs))]
+
+    assert best_shift(DissimilarityConfig()) == -2
+    assert best_shift(DissimilarityConfig(wall_sides=True)) == 0
 
 
 def test_psi_faithful_charges_cells_far_outside_the_other_grid_their_exact_distance() -> None:
@@ -359,6 +459,17 @@ def test_bad_input_raises_one_line_value_errors() -> None:
             "distances1",
         ),
         (lambda: acceptance_index(good, good, np.zeros(3), tolerance_cells=-1), "tolerance"),
+        (
+            lambda: dissimilarity(
+                good,
+                good,
+                np.zeros(3),
+                distances1=distance_maps(good),
+                distances2=distance_maps(good),
+                config=DissimilarityConfig(wall_sides=True),
+            ),
+            "sides=True",
+        ),
     ]
     for call, words in cases:
         with pytest.raises(ValueError) as error:
@@ -370,7 +481,12 @@ def test_bad_input_raises_one_line_value_errors() -> None:
 
 @pytest.mark.parametrize(
     ("field", "value"),
-    [("max_free_cells", 0), ("min_overlap_cells", 1.5), ("restrict_to_overlap", 1)],
+    [
+        ("max_free_cells", 0),
+        ("min_overlap_cells", 1.5),
+        ("restrict_to_overlap", 1),
+        ("wall_sides", "yes"),
+    ],
 )
 def test_config_errors_name_field_and_value(field: str, value: object) -> None:
     with pytest.raises(ValueError, match=rf"DissimilarityConfig\.{field} .*{value!r}"):

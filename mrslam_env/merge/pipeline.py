@@ -29,6 +29,7 @@ from mrslam_env.geometry import compose, inverse, transform_points, wrap_scalar
 from mrslam_env.gridmap import GridMap
 from mrslam_env.merge.dissimilarity import (
     Agreement,
+    DissimilarityConfig,
     DistanceMaps,
     acceptance_index,
     dissimilarity,
@@ -87,10 +88,18 @@ class MergeConfig:
     random_walk: RandomWalkConfig = field(default_factory=RandomWalkConfig)
     final_random_walk: RandomWalkConfig = field(
         default_factory=lambda: RandomWalkConfig(
-            iterations=200, initial_std_xy=0.03, initial_std_theta=math.radians(0.5)
+            iterations=600,
+            initial_std_xy=0.03,
+            initial_std_theta=math.radians(0.5),
+            dissimilarity=DissimilarityConfig(wall_sides=True),
         )
     )
-    """The last refinement, at the input resolution."""
+    """The last refinement, at the input resolution. Its psi matches walls by the side
+    they were seen from (``DissimilarityConfig.wall_sides``): two robots often see a thin
+    wall from its two sides, and plain psi then lays the faces over each other. On 45
+    verification-time map pairs of live runs (3 seeds each) the final error was median
+    0.024 m, p90 0.048 m, max 0.105 m with plain psi; median 0.023, p90 0.037, max
+    0.095 m with wall sides (600 iterations; 200 left some walks short, max 0.11 m)."""
     candidates: int = 4
     """How many of each direction's ranked hypotheses are refined and judged."""
     correlation: CorrelationConfig = field(default_factory=CorrelationConfig)
@@ -815,7 +824,8 @@ def _refine_at_input_resolution(
     """The last random walk, at the finer input resolution: transform, psi, agreement."""
     fine = min(m1.resolution, m2.resolution)
     f1, f2 = _at_resolution(m1, fine), _at_resolution(m2, fine)
-    d1, d2 = distance_maps(f1), distance_maps(f2)
+    sides = config.final_random_walk.dissimilarity.wall_sides
+    d1, d2 = distance_maps(f1, sides=sides), distance_maps(f2, sides=sides)
     final = refine_random_walk(
         f1,
         f2,

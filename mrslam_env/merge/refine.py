@@ -281,9 +281,9 @@ def refine_random_walk(
     check_same_resolution(m1, m2)
     _check_has_known(m1, "map 1")
     _check_has_known(m2, "map 2")
-    d1 = _checked_distances(m1, distances1, "distances1")
-    d2 = _checked_distances(m2, distances2, "distances2")
     cost = config.dissimilarity
+    d1 = _checked_distances(m1, distances1, "distances1", sides=cost.wall_sides)
+    d2 = _checked_distances(m2, distances2, "distances2", sides=cost.wall_sides)
 
     initial_psi = _psi(m1, m2, start, d1, d2, cost)
     pivot = _pivot(m2, d2)
