@@ -389,29 +389,26 @@ def directed_distance_sum(
     (float, int)
         Sum of distances (cells) and number of cells counted.
     """
-    total = 0.0
-    count = 0
-    for k in range(0, cells.shape[0], stride):
-        value = _image_distance(
-            cells[k, 0],
-            cells[k, 1],
-            source_origin_x,
-            source_origin_y,
-            cos_theta,
-            sin_theta,
-            translation_x,
-            translation_y,
-            target_origin_x,
-            target_origin_y,
-            resolution,
-            distance,
-            known,
-            restrict_to_overlap,
-        )
-        if value >= 0:
-            total += value
-            count += 1
-    return total, count
+    rows, cols = distance.shape
+    return _distance_sum(
+        cells,
+        stride,
+        np.empty(0),
+        0.0,
+        source_origin_x,
+        source_origin_y,
+        cos_theta,
+        sin_theta,
+        translation_x,
+        translation_y,
+        target_origin_x,
+        target_origin_y,
+        resolution,
+        distance.reshape((1, rows, cols)),
+        known,
+        restrict_to_overlap,
+        0,
+    )
 
 
 @numba.njit(cache=True)
@@ -435,42 +432,33 @@ def directed_side_distance_sum(
     image reads the target layer of its side turned by ``theta`` (``target_from_source``
     rotation), at most ``cap``; or the last layer (any occupied cell), uncapped, when it
     has no side."""
-    n_bins = by_side.shape[0] - 1
-    width = 2.0 * math.pi / n_bins
-    cos_theta, sin_theta = math.cos(theta), math.sin(theta)
-    total = 0.0
-    count = 0
-    for k in range(cells.shape[0]):
-        side = sides[k]
-        layer = n_bins
-        if not math.isnan(side):
-            layer = math.floor((side + theta) / width) % n_bins
-        value = _image_distance(
-            cells[k, 0],
-            cells[k, 1],
-            source_origin_x,
-            source_origin_y,
-            cos_theta,
-            sin_theta,
-            translation_x,
-            translation_y,
-            target_origin_x,
-            target_origin_y,
-            resolution,
-            by_side[layer],
-            known,
-            restrict_to_overlap,
-        )
-        if value >= 0:
-            total += value if layer == n_bins else min(value, cap)
-            count += 1
-    return total, count
+    return _distance_sum(
+        cells,
+        1,
+        sides,
+        theta,
+        source_origin_x,
+        source_origin_y,
+        math.cos(theta),
+        math.sin(theta),
+        translation_x,
+        translation_y,
+        target_origin_x,
+        target_origin_y,
+        resolution,
+        by_side,
+        known,
+        restrict_to_overlap,
+        cap,
+    )
 
 
-@numba.njit(cache=True, inline="always")
-def _image_distance(
-    iy: int,
-    ix: int,
+@numba.njit(cache=True)
+def _distance_sum(
+    cells: NDArray[np.int64],
+    stride: int,
+    sides: NDArray[np.float64],
+    theta: float,
     source_origin_x: float,
     source_origin_y: float,
     cos_theta: float,
@@ -480,36 +468,53 @@ def _image_distance(
     target_origin_x: float,
     target_origin_y: float,
     resolution: float,
-    distance: NDArray[np.int32],
+    layers: NDArray[np.int32],
     known: NDArray[np.bool_],
     restrict_to_overlap: bool,
-) -> int:
-    """The target distance at the image of source cell (iy, ix); -1 when not counted."""
-    rows, cols = distance.shape
-    x = source_origin_x + (ix + 0.5) * resolution
-    y = source_origin_y + (iy + 0.5) * resolution
-    u = cos_theta * x - sin_theta * y + translation_x
-    v = sin_theta * x + cos_theta * y + translation_y
-    jx = math.floor((u - target_origin_x) / resolution)
-    jy = math.floor((v - target_origin_y) / resolution)
-    if restrict_to_overlap:
-        if jx < 0 or jx >= cols or jy < 0 or jy >= rows or not known[jy, jx]:
-            return -1
-        return int(distance[jy, jx])
-    outside = 0
-    if jx < 0:
-        outside -= jx
-        jx = 0
-    elif jx >= cols:
-        outside += jx - cols + 1
-        jx = cols - 1
-    if jy < 0:
-        outside -= jy
-        jy = 0
-    elif jy >= rows:
-        outside += jy - rows + 1
-        jy = rows - 1
-    return int(distance[jy, jx]) + outside
+    cap: int,
+) -> tuple[float, int]:
+    """The loop of both kernels. ``layers`` (L, rows, cols); a cell reads the last layer,
+    or with ``sides`` given and its side known, layer ``bin(side + theta)`` capped."""
+    n_bins = layers.shape[0] - 1
+    width = 2.0 * math.pi / max(n_bins, 1)
+    with_sides = sides.shape[0] > 0
+    rows, cols = layers.shape[1], layers.shape[2]
+    total = 0.0
+    count = 0
+    for k in range(0, cells.shape[0], stride):
+        layer = n_bins
+        if with_sides and not math.isnan(sides[k]):
+            layer = math.floor((sides[k] + theta) / width) % n_bins
+        x = source_origin_x + (cells[k, 1] + 0.5) * resolution
+        y = source_origin_y + (cells[k, 0] + 0.5) * resolution
+        u = cos_theta * x - sin_theta * y + translation_x
+        v = sin_theta * x + cos_theta * y + translation_y
+        jx = math.floor((u - target_origin_x) / resolution)
+        jy = math.floor((v - target_origin_y) / resolution)
+        if restrict_to_overlap:
+            if jx < 0 or jx >= cols or jy < 0 or jy >= rows or not known[jy, jx]:
+                continue
+            value = layers[layer, jy, jx]
+        else:
+            outside = 0
+            if jx < 0:
+                outside -= jx
+                jx = 0
+            elif jx >= cols:
+                outside += jx - cols + 1
+                jx = cols - 1
+            if jy < 0:
+                outside -= jy
+                jy = 0
+            elif jy >= rows:
+                outside += jy - rows + 1
+                jy = rows - 1
+            value = layers[layer, jy, jx] + outside
+        if layer != n_bins and value > cap:
+            value = cap
+        total += value
+        count += 1
+    return total, count
 
 
 def _sides(distances: DistanceMaps) -> NDArray[np.float64]:
