@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass, field, fields
 
 from mrslam_env.slam.config import SlamConfig
+from mrslam_env.validation import require
 
 __all__ = [
     "CommConfig",
@@ -34,11 +35,8 @@ def _check(
     low_open: bool = False,
 ) -> None:
     ok = math.isfinite(value) and (value > low if low_open else value >= low) and value <= high
-    if not ok:
-        bound = f"{'>' if low_open else '>='} {low}" + (
-            f" and <= {high}" if high < math.inf else ""
-        )
-        raise ValueError(f"{cls_name}.{name} must be {bound}, got {value!r}")
+    bound = f"{'>' if low_open else '>='} {low}" + (f" and <= {high}" if high < math.inf else "")
+    require(cls_name, name, value, ok, bound)
 
 
 def _check_all(

@@ -44,6 +44,7 @@ from mrslam_env.merge.mcl import (
 )
 from mrslam_env.merge.skeleton import SkeletonGraph, free_space_graph
 from mrslam_env.merge.virtual import VirtualRobotConfig, VirtualRun, virtual_robot_runs
+from mrslam_env.validation import check_fields
 
 FloatArray = NDArray[np.float64]
 
@@ -62,27 +63,6 @@ __all__ = [
     "scan_agreement",
     "wall_orientation_histogram",
 ]
-
-
-def _check_fields(
-    config: object,
-    *,
-    positive: tuple[str, ...] = (),
-    non_negative: tuple[str, ...] = (),
-    counts: tuple[str, ...] = (),
-) -> None:
-    """Validate a config's fields: finite numbers > 0, finite numbers >= 0, ints >= 1."""
-    name = type(config).__name__
-    for attr in positive + non_negative:
-        value = getattr(config, attr)
-        number = isinstance(value, int | float) and math.isfinite(value)
-        if not (number and (value > 0 if attr in positive else value >= 0)):
-            bound = "> 0" if attr in positive else ">= 0"
-            raise ValueError(f"{name}.{attr} must be a finite number {bound}, got {value!r}")
-    for attr in counts:
-        value = getattr(config, attr)
-        if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
-            raise ValueError(f"{name}.{attr} must be an int >= 1, got {value!r}")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -107,7 +87,7 @@ class HypothesisConfig:
 
     def __post_init__(self) -> None:
         name = type(self).__name__
-        _check_fields(
+        check_fields(
             self,
             positive=(
                 "translation_tolerance",
@@ -572,7 +552,7 @@ class CorrelationConfig:
     """At most this many placements are returned (best scores over all rotations)."""
 
     def __post_init__(self) -> None:
-        _check_fields(
+        check_fields(
             self,
             positive=(
                 "peak_separation",

@@ -12,36 +12,13 @@ import math
 from dataclasses import dataclass, field
 from typing import Literal, get_args
 
+from mrslam_env.validation import check_fields
+from mrslam_env.validation import require as _require
+
 __all__ = ["SLAM_MODES", "GridConfig", "MatcherConfig", "SlamConfig", "SlamMode"]
 
 SlamMode = Literal["slam", "odometry", "ground_truth"]
 SLAM_MODES: tuple[str, ...] = get_args(SlamMode)
-
-
-def _require(cls_name: str, name: str, value: object, ok: bool, wanted: str) -> None:
-    if not ok:
-        raise ValueError(f"{cls_name}.{name} must be {wanted}, got {value!r}")
-
-
-def _positive(obj: object, *names: str) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        ok = isinstance(value, int | float) and math.isfinite(value) and value > 0
-        _require(type(obj).__name__, name, value, ok, "a finite number > 0")
-
-
-def _non_negative(obj: object, *names: str) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        ok = isinstance(value, int | float) and math.isfinite(value) and value >= 0
-        _require(type(obj).__name__, name, value, ok, "a finite number >= 0")
-
-
-def _positive_int(obj: object, *names: str) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        ok = isinstance(value, int) and not isinstance(value, bool) and value >= 1
-        _require(type(obj).__name__, name, value, ok, "an int >= 1")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -92,9 +69,21 @@ class GridConfig:
 
     def __post_init__(self) -> None:
         name = type(self).__name__
-        _positive(self, "resolution", "log_odds_hit", "log_odds_max", "fine_sigma", "coarse_sigma")
-        _non_negative(
-            self, "occupied_threshold", "no_return_clear_distance", "min_range", "surface_margin"
+        check_fields(
+            self,
+            positive=(
+                "resolution",
+                "log_odds_hit",
+                "log_odds_max",
+                "fine_sigma",
+                "coarse_sigma",
+            ),
+            non_negative=(
+                "occupied_threshold",
+                "no_return_clear_distance",
+                "min_range",
+                "surface_margin",
+            ),
         )
         for attr in ("log_odds_miss", "log_odds_min"):
             value = getattr(self, attr)
@@ -115,7 +104,7 @@ class GridConfig:
             self.free_threshold > self.log_odds_min,
             f"> log_odds_min ({self.log_odds_min})",
         )
-        _positive_int(self, "growth_chunk")
+        check_fields(self, counts=("growth_chunk",))
         _require(
             name,
             "growth_chunk",
@@ -190,33 +179,41 @@ class MatcherConfig:
     dropped (odometry is kept there)."""
 
     def __post_init__(self) -> None:
-        _positive(
+        check_fields(
             self,
-            "coarse_angle_step",
-            "fine_angle_step",
-            "coarse_xy_step",
-            "angle_window_max",
-            "xy_window_max",
-            "residual_std",
-            "prior_xy_std_base",
-            "prior_angle_std_base",
+            positive=(
+                "coarse_angle_step",
+                "fine_angle_step",
+                "coarse_xy_step",
+                "angle_window_max",
+                "xy_window_max",
+                "residual_std",
+                "prior_xy_std_base",
+                "prior_angle_std_base",
+            ),
+            non_negative=(
+                "angle_window_base",
+                "angle_window_per_rad",
+                "angle_window_per_m",
+                "xy_window_base",
+                "xy_window_per_m",
+                "xy_window_per_rad",
+                "prior_xy_std_per_m",
+                "prior_angle_std_per_rad",
+                "prior_weight",
+                "min_score",
+                "fine_search_cells",
+                "degenerate_ratio",
+            ),
         )
-        _non_negative(
+        check_fields(
             self,
-            "angle_window_base",
-            "angle_window_per_rad",
-            "angle_window_per_m",
-            "xy_window_base",
-            "xy_window_per_m",
-            "xy_window_per_rad",
-            "prior_xy_std_per_m",
-            "prior_angle_std_per_rad",
-            "prior_weight",
-            "min_score",
-            "fine_search_cells",
-            "degenerate_ratio",
+            counts=(
+                "coarse_point_stride",
+                "refine_iterations",
+                "min_points",
+            ),
         )
-        _positive_int(self, "coarse_point_stride", "refine_iterations", "min_points")
         name = type(self).__name__
         _require(
             name,
@@ -269,10 +266,16 @@ class SlamConfig:
         _require(
             type(self).__name__, "mode", self.mode, self.mode in SLAM_MODES, f"one of {SLAM_MODES}"
         )
-        _non_negative(
-            self, "min_translation", "min_rotation", "map_update_translation", "map_update_rotation"
+        check_fields(
+            self,
+            non_negative=(
+                "min_translation",
+                "min_rotation",
+                "map_update_translation",
+                "map_update_rotation",
+            ),
         )
-        _positive_int(self, "integrate_rejected_after")
+        check_fields(self, counts=("integrate_rejected_after",))
         for name, cls in (("grid", GridConfig), ("matcher", MatcherConfig)):
             value = getattr(self, name)
             _require(type(self).__name__, name, value, isinstance(value, cls), f"a {cls.__name__}")
