@@ -70,7 +70,7 @@ def wall_side(grid: GridMap, iy: int, ix: int) -> float | None:
 
 
 def side_bin(angle: float) -> int:
-    return math.floor(angle / (2 * math.pi / SIDE_BINS)) % SIDE_BINS
+    return math.floor(angle / (2 * math.pi / SIDE_BINS) + 0.5) % SIDE_BINS
 
 
 def brute_force_psi(
@@ -216,6 +216,30 @@ def test_psi_with_wall_sides_matches_the_definition(restrict: bool) -> None:
         assert expected != pytest.approx(plain)  # the side test matters on these grids
         got = dissimilarity(m1, m2, transform, config=config)
         assert got == pytest.approx(expected, rel=1e-12, abs=1e-12)
+
+
+def test_psi_with_wall_sides_charges_the_sentinel_against_a_map_without_walls() -> None:
+    """With no wall in the other map there is no side to match: the sentinel, as in plain
+    psi, not the side cap."""
+    rng = np.random.default_rng(5)
+    walls = random_grid(rng, (12, 12), p=(0.5, 0.3, 0.2))
+    open_floor = random_grid(rng, (12, 12), p=(0.8, 0.0, 0.2))
+    transform = np.array([0.1, -0.05, 0.2])
+    for restrict in (True, False):
+        plain, sides = (
+            DissimilarityConfig(
+                restrict_to_overlap=restrict,
+                wall_sides=s,
+                max_free_cells=10**9,
+                min_overlap_cells=1,
+            )
+            for s in (False, True)
+        )
+        with_sides = dissimilarity(walls, open_floor, transform, config=sides)
+        assert with_sides == dissimilarity(walls, open_floor, transform, config=plain)
+        if restrict:
+            expected = brute_force_psi(walls, open_floor, transform, restrict=True, sides=True)
+            assert with_sides == pytest.approx(expected, rel=1e-12)
 
 
 def thick_wall_pair(seen_from: str) -> GridMap:

@@ -23,7 +23,7 @@ from merge_fixtures import map_pair, poses_near, scan_map
 
 from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
-from mrslam_env.merge.dissimilarity import acceptance_index
+from mrslam_env.merge.dissimilarity import DissimilarityConfig, acceptance_index
 from mrslam_env.merge.fuse import resample_map
 from mrslam_env.merge.pipeline import (
     MergeConfig,
@@ -32,6 +32,7 @@ from mrslam_env.merge.pipeline import (
     merge_maps,
     relative_transform_error,
 )
+from mrslam_env.merge.refine import RandomWalkConfig
 from mrslam_env.worlds import build_world
 
 ONE_DEGREE = math.radians(1.0)
@@ -105,6 +106,20 @@ def test_merging_a_warped_copy_recovers_the_warp(
     assert result.hypotheses[0].confident
     assert result.agreement is not None and result.agreement.index >= 0.95
     assert result.fused is not None and math.isfinite(result.psi)
+
+
+def test_every_random_walk_may_match_walls_by_side(office_observation: Observation) -> None:
+    """Wall-side psi in the working-resolution walks too (not the default): merge_maps
+    builds the side distance maps it needs and recovers a warp."""
+    obs = office_observation
+    world_from_map2 = compose(obs.world_from_map1, np.array([0.42, 1.91, math.radians(-45.0)]))
+    m2 = scan_map(obs.world, obs.poses, world_from_map2)
+    truth = compose(inverse(obs.world_from_map1), world_from_map2)
+    sides = RandomWalkConfig(dissimilarity=DissimilarityConfig(wall_sides=True))
+    result = merge_maps(obs.m1, m2, MergeConfig(random_walk=sides), rng=SEED)
+    translation, rotation = errors(result, truth, m2)
+    assert translation <= obs.m1.resolution, f"{translation:.4f} m"
+    assert rotation <= ONE_DEGREE, f"{math.degrees(rotation):.3f} deg"
 
 
 # -- 2. realistic partial overlaps, and pairs that do not overlap ---------------------------

@@ -70,8 +70,10 @@ RESOLUTION_RTOL = 1e-6
 """Two resolutions closer than this relative tolerance count as equal."""
 
 SIDE_BINS = 8
-"""Direction bins of a wall cell's seen side (``DissimilarityConfig.wall_sides``); cells
-match when their bins differ by at most one, i.e. sides within 45-135 degrees."""
+"""Direction bins of a wall cell's seen side (``DissimilarityConfig.wall_sides``), centred
+on multiples of 45 degrees (where the sides of straight and diagonal walls lie, sums of
+whole-cell offsets); cells match when their bins differ by at most one: sides less
+than 45 degrees apart always match, more than 90 degrees apart never."""
 
 SIDE_DISTANCE_CAP = 3
 """Cells: the most a wall cell with a side is charged for its distance to the nearest
@@ -308,7 +310,7 @@ def _wall_sides(free: NDArray[np.bool_], cells: NDArray[np.int64]) -> NDArray[np
 def _side_bins(sides: NDArray[np.float64]) -> NDArray[np.int64]:
     """Direction bin of each side (-1 for NaN)."""
     width = 2 * math.pi / SIDE_BINS
-    bins = np.floor(np.nan_to_num(sides) / width).astype(np.int64) % SIDE_BINS
+    bins = np.floor(np.nan_to_num(sides) / width + 0.5).astype(np.int64) % SIDE_BINS
     bins[np.isnan(sides)] = -1
     return bins
 
@@ -404,7 +406,7 @@ def directed_distance_sum(
         target_origin_x,
         target_origin_y,
         resolution,
-        distance.reshape((1, rows, cols)),
+        np.ascontiguousarray(distance).reshape((1, rows, cols)),
         known,
         restrict_to_overlap,
         0,
@@ -484,7 +486,7 @@ def _distance_sum(
     for k in range(0, cells.shape[0], stride):
         layer = n_bins
         if with_sides and not math.isnan(sides[k]):
-            layer = math.floor((sides[k] + theta) / width) % n_bins
+            layer = math.floor((sides[k] + theta) / width + 0.5) % n_bins
         x = source_origin_x + (cells[k, 1] + 0.5) * resolution
         y = source_origin_y + (cells[k, 0] + 0.5) * resolution
         u = cos_theta * x - sin_theta * y + translation_x
@@ -581,19 +583,17 @@ def _psi(
         ):
             if len(source.occupied_cells) == 0:
                 continue
-            total, count = directed_side_distance_sum(
-                source.occupied_cells,
-                _sides(source),
-                placement[0],
-                placement[1],
-                rotation,
-                *placement[4:],
-                resolution,
-                _by_side(target),
-                target.known,
-                restrict,
-                SIDE_DISTANCE_CAP,
-            )
+            if len(target.occupied_cells) == 0:  # no wall to match: the sentinel
+                total, count = directed_distance_sum(
+                    source.occupied_cells, 1, *placement, resolution, target.occupied,
+                    target.known, restrict,
+                )  # fmt: skip
+            else:
+                total, count = directed_side_distance_sum(
+                    source.occupied_cells, _sides(source), placement[0], placement[1],
+                    rotation, *placement[4:], resolution, _by_side(target), target.known,
+                    restrict, SIDE_DISTANCE_CAP,
+                )  # fmt: skip
             counts[direction] += count
             if count:
                 psi += total / count

@@ -658,7 +658,8 @@ def merge_maps(
                 f"{name} has no free space left at the working resolution {resolution:g} m "
                 "(only scattered free cells)"
             )
-    d1, d2 = distance_maps(w1), distance_maps(w2)
+    sides = config.random_walk.dissimilarity.wall_sides
+    d1, d2 = distance_maps(w1, sides=sides), distance_maps(w2, sides=sides)
     seconds["prepare"] = time.perf_counter() - tick
 
     tick = time.perf_counter()
