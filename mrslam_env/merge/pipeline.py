@@ -98,8 +98,8 @@ class MergeConfig:
     they were seen from (``DissimilarityConfig.wall_sides``): two robots often see a thin
     wall from its two sides, and plain psi then lays the faces over each other. On 45
     verification-time map pairs of live runs (3 seeds each) the final error was median
-    0.024 m, p90 0.048 m, max 0.105 m with plain psi; median 0.023, p90 0.037, max
-    0.095 m with wall sides (600 iterations; 200 left some walks short, max 0.11 m)."""
+    0.024 m, p90 0.048 m, max 0.105 m with plain psi; median 0.024, p90 0.040, max
+    0.082 m with wall sides (600 iterations; 200 left some walks short, max 0.11 m)."""
     candidates: int = 4
     """How many of each direction's ranked hypotheses are refined and judged."""
     correlation: CorrelationConfig = field(default_factory=CorrelationConfig)
