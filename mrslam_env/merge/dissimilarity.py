@@ -519,16 +519,11 @@ def _distance_sum(
     return total, count
 
 
-def _sides(distances: DistanceMaps) -> NDArray[np.float64]:
-    if distances.occupied_sides is None:
+def _side_maps(distances: DistanceMaps) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
+    """``(occupied_sides, occupied_by_side)``, or a ValueError if they were not computed."""
+    if distances.occupied_sides is None or distances.occupied_by_side is None:
         raise ValueError("DissimilarityConfig.wall_sides needs distance_maps(grid, sides=True)")
-    return distances.occupied_sides
-
-
-def _by_side(distances: DistanceMaps) -> NDArray[np.int32]:
-    if distances.occupied_by_side is None:
-        raise ValueError("DissimilarityConfig.wall_sides needs distance_maps(grid, sides=True)")
-    return distances.occupied_by_side
+    return distances.occupied_sides, distances.occupied_by_side
 
 
 def _free_stride(count: int, max_free_cells: int) -> int:
@@ -589,10 +584,11 @@ def _psi(
                     target.known, restrict,
                 )  # fmt: skip
             else:
+                sides, by_side = _side_maps(source)[0], _side_maps(target)[1]
                 total, count = directed_side_distance_sum(
-                    source.occupied_cells, _sides(source), placement[0], placement[1],
-                    rotation, *placement[4:], resolution, _by_side(target), target.known,
-                    restrict, SIDE_DISTANCE_CAP,
+                    source.occupied_cells, sides, placement[0], placement[1], rotation,
+                    *placement[4:], resolution, by_side, target.known, restrict,
+                    SIDE_DISTANCE_CAP,
                 )  # fmt: skip
             counts[direction] += count
             if count:

@@ -12,8 +12,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Literal, get_args
 
-from mrslam_env.validation import check_fields
-from mrslam_env.validation import require as _require
+from mrslam_env.validation import check_fields, require
 
 __all__ = ["SLAM_MODES", "GridConfig", "MatcherConfig", "SlamConfig", "SlamMode"]
 
@@ -87,17 +86,17 @@ class GridConfig:
         )
         for attr in ("log_odds_miss", "log_odds_min"):
             value = getattr(self, attr)
-            _require(name, attr, value, math.isfinite(value) and value < 0, "a finite number < 0")
+            require(name, attr, value, math.isfinite(value) and value < 0, "a finite number < 0")
         value = self.free_threshold
-        _require(name, "free_threshold", value, math.isfinite(value) and value <= 0, "<= 0")
-        _require(
+        require(name, "free_threshold", value, math.isfinite(value) and value <= 0, "<= 0")
+        require(
             name,
             "occupied_threshold",
             self.occupied_threshold,
             self.occupied_threshold < self.log_odds_max,
             f"< log_odds_max ({self.log_odds_max})",
         )
-        _require(
+        require(
             name,
             "free_threshold",
             self.free_threshold,
@@ -105,7 +104,7 @@ class GridConfig:
             f"> log_odds_min ({self.log_odds_min})",
         )
         check_fields(self, counts=("growth_chunk",))
-        _require(
+        require(
             name,
             "growth_chunk",
             self.growth_chunk,
@@ -205,9 +204,6 @@ class MatcherConfig:
                 "fine_search_cells",
                 "degenerate_ratio",
             ),
-        )
-        check_fields(
-            self,
             counts=(
                 "coarse_point_stride",
                 "refine_iterations",
@@ -215,15 +211,15 @@ class MatcherConfig:
             ),
         )
         name = type(self).__name__
-        _require(
+        require(
             name,
             "fine_angle_step",
             self.fine_angle_step,
             self.fine_angle_step <= self.coarse_angle_step,
             f"<= coarse_angle_step ({self.coarse_angle_step})",
         )
-        _require(name, "min_score", self.min_score, self.min_score <= 1.0, "<= 1")
-        _require(
+        require(name, "min_score", self.min_score, self.min_score <= 1.0, "<= 1")
+        require(
             name, "degenerate_ratio", self.degenerate_ratio, self.degenerate_ratio <= 1.0, "<= 1"
         )
 
@@ -263,7 +259,7 @@ class SlamConfig:
     pose, so that mapping goes on where matching cannot."""
 
     def __post_init__(self) -> None:
-        _require(
+        require(
             type(self).__name__, "mode", self.mode, self.mode in SLAM_MODES, f"one of {SLAM_MODES}"
         )
         check_fields(
@@ -274,8 +270,8 @@ class SlamConfig:
                 "map_update_translation",
                 "map_update_rotation",
             ),
+            counts=("integrate_rejected_after",),
         )
-        check_fields(self, counts=("integrate_rejected_after",))
         for name, cls in (("grid", GridConfig), ("matcher", MatcherConfig)):
             value = getattr(self, name)
-            _require(type(self).__name__, name, value, isinstance(value, cls), f"a {cls.__name__}")
+            require(type(self).__name__, name, value, isinstance(value, cls), f"a {cls.__name__}")
