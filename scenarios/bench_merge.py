@@ -47,6 +47,15 @@ Translation error ``|t_est - t_true|`` (m) and rotation error ``|wrap(theta_est 
 theta_true)|`` (deg). On an overlapping pair: **success** when both are within 0.25 m and
 2°, **wrong** when a transform is returned outside that tolerance, **refused** when None.
 On a no-overlap pair: **correct refusal** for None, **wrong** for any transform.
+
+Aliasing
+--------
+Some pairs cannot be merged from the two maps alone: in a repetitive or symmetric building
+a wrong placement fits as well as the true one. The CLI labels every overlapping pair with
+:func:`scenarios.aliasing.aliasing`, an exhaustive placement search that uses the truth
+only to tell the true placement from the rest (``clear``: the maps single out the truth;
+``close``; ``misleading``), and the summary adds the success rate on the ``clear`` pairs
+with overlap >= 30 %.
 """
 
 from __future__ import annotations
@@ -91,9 +100,11 @@ __all__ = [
     "Tolerance",
     "cell_agreement",
     "classify_outcome",
+    "format_aliasing_breakdown",
     "format_merge_table",
     "format_scenario_breakdown",
     "generate_pairs",
+    "grid_footprint",
     "load_or_generate_pairs",
     "load_pairs",
     "merge_pair_from_runs",
@@ -320,7 +331,7 @@ def resample_cells(
     return cells
 
 
-def _footprint(grid: GridMap, frame_from_grid: FloatArray) -> FloatArray:
+def grid_footprint(grid: GridMap, frame_from_grid: FloatArray) -> FloatArray:
     """Corners (4, 2) of a grid's extent in another frame."""
     xmin, ymin, xmax, ymax = grid.extent
     corners = np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])
@@ -337,7 +348,7 @@ def true_overlap(m1: GridMap, m2: GridMap, map1_from_map2: FloatArray) -> float:
     """
     transform = np.asarray(map1_from_map2, dtype=np.float64)
     resolution = min(m1.resolution, m2.resolution)
-    corners = np.vstack([_footprint(m1, np.zeros(3)), _footprint(m2, transform)])
+    corners = np.vstack([grid_footprint(m1, np.zeros(3)), grid_footprint(m2, transform)])
     lo, hi = corners.min(axis=0), corners.max(axis=0)
     shape = (
         math.ceil((hi[1] - lo[1]) / resolution),
@@ -1043,13 +1054,17 @@ def summarize(
     ``median_seconds_small`` over the ``pairs_small`` whose grids are at most
     ``small_side`` cells on a side; ``wrong_as_good_as_truth``: wrong answers on
     overlapping pairs whose :func:`cell_agreement` is at least the truth's (the maps alone
-    cannot tell them apart).
+    cannot tell them apart). When the rows carry an ``aliasing`` label
+    (:mod:`scenarios.aliasing`; the CLI adds it), also ``pairs_high_clear`` and
+    ``success_rate_high_clear``: the pairs with overlap >= ``high_overlap`` whose maps single
+    out the truth (label ``clear``), and the successes among them.
     """
     summary: dict[str, dict[str, Any]] = {}
     for name in methods:
         mine = [row for row in rows if row["method"] == name]
         overlapping = [row for row in mine if row["overlapping"]]
         high = [row for row in overlapping if row["overlap"] >= high_overlap]
+        clear = [row for row in high if row.get("aliasing") == "clear"]
         none = [row for row in mine if not row["overlapping"]]
         returned = [row for row in overlapping if row["returned"]]
         translation = [row["translation_error"] for row in returned]
@@ -1061,6 +1076,11 @@ def summarize(
             "pairs": len(mine),
             "pairs_high": len(high),
             "success_rate_high": _rate(sum(r["outcome"] == "success" for r in high), len(high)),
+            "aliasing_labelled": any(row.get("aliasing") for row in mine),
+            "pairs_high_clear": len(clear),
+            "success_rate_high_clear": _rate(
+                sum(r["outcome"] == "success" for r in clear), len(clear)
+            ),
             "pairs_overlapping": len(overlapping),
             "success_rate_overlapping": _rate(
                 sum(r["outcome"] == "success" for r in overlapping), len(overlapping)
@@ -1113,6 +1133,17 @@ def format_merge_table(
             (
                 f"success, overlap ≥ {100 * high_overlap:.0f}% (n={first['pairs_high']})",
                 lambda s: _percent(s["success_rate_high"]),
+            ),
+            *(
+                [
+                    (
+                        f"success, overlap ≥ {100 * high_overlap:.0f}%, maps single out the "
+                        f"truth (n={first['pairs_high_clear']})",
+                        lambda s: _percent(s["success_rate_high_clear"]),
+                    )
+                ]
+                if first.get("aliasing_labelled")
+                else []
             ),
             (
                 f"success, all overlapping (n={first['pairs_overlapping']})",
@@ -1177,6 +1208,44 @@ def format_scenario_breakdown(rows: Sequence[dict[str, Any]], method: str = "our
     for world in sorted(counts):
         lines.append(
             f"| {world} | " + " | ".join(str(counts[world].get(o, 0)) for o in outcomes) + " |"
+        )
+    return "\n".join(lines)
+
+
+def format_aliasing_breakdown(
+    rows: Sequence[dict[str, Any]], method: str = "ours", *, high_overlap: float = 0.3
+) -> str:
+    """Outcomes of one method on the pairs with overlap >= ``high_overlap`` by their
+    ``aliasing`` label (:mod:`scenarios.aliasing`), as a markdown table; empty when the
+    rows carry no labels."""
+    mine = [
+        r
+        for r in rows
+        if r["method"] == method and r["overlapping"] and r["overlap"] >= high_overlap
+    ]
+    if not any(r.get("aliasing") for r in mine):
+        return ""
+    outcomes = ("success", "refused", "wrong")
+    lines = [
+        f"| {method}: the maps, overlap ≥ {100 * high_overlap:.0f}% | pairs | "
+        + " | ".join(outcomes)
+        + " |",
+        "| --- | ---: |" + " ---: |" * len(outcomes),
+    ]
+    for label, meaning in (
+        ("clear", "single out the truth"),
+        ("close", "fit a wrong placement nearly as well"),
+        ("misleading", "fit a wrong placement as well or better"),
+    ):
+        group = [r for r in mine if r.get("aliasing") == label]
+        counts = " | ".join(str(sum(r["outcome"] == o for r in group)) for o in outcomes)
+        lines.append(f"| {label}: {meaning} | {len(group)} | {counts} |")
+    dominated = [r for r in mine if r.get("aliasing_dominated")]
+    if dominated:
+        counts = " | ".join(str(sum(r["outcome"] == o for r in dominated)) for o in outcomes)
+        lines.append(
+            f"| of all these, a wrong placement overlaps more with no more conflicts "
+            f"| {len(dominated)} | {counts} |"
         )
     return "\n".join(lines)
 

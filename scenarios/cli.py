@@ -115,6 +115,12 @@ def _build_parser() -> argparse.ArgumentParser:
         default=Path("runs") / "bench-merge-pairs",
         help="folder of the cached pairs (default runs/bench-merge-pairs)",
     )
+    merge.add_argument(
+        "--no-aliasing",
+        action="store_true",
+        help="skip the exhaustive placement search that labels how well each pair's maps "
+        "single out the truth (a few seconds a pair, cached with the pairs)",
+    )
     merge.add_argument("--out", type=Path, help="per-pair results: .csv, else JSON")
     merge.add_argument("--json", action="store_true", help="print the summary as JSON")
     return parser
@@ -287,8 +293,10 @@ def _cmd_bench_explore(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_merge(args: argparse.Namespace) -> int:
+    from scenarios.aliasing import load_or_compute_aliasing
     from scenarios.bench_merge import (
         PairGenerationConfig,
+        format_aliasing_breakdown,
         format_merge_table,
         format_scenario_breakdown,
         load_or_generate_pairs,
@@ -313,6 +321,14 @@ def _cmd_bench_merge(args: argparse.Namespace) -> int:
         config, args.cache, regenerate=args.regenerate, progress=progress
     )
     rows = run_merge_benchmark(pairs, methods, seed=args.seed, progress=progress)
+    if not args.no_aliasing:
+        folder = Path(args.cache) / config.cache_key()
+        labels = load_or_compute_aliasing(pairs, folder, progress=progress)
+        for row in rows:
+            found = labels.get(row["pair_id"])
+            row["aliasing"] = None if found is None else found.label
+            row["aliasing_ratio"] = None if found is None else found.ratio
+            row["aliasing_dominated"] = None if found is None else found.dominated
     summary = summarize(rows, list(methods))
     generation = {
         "pairs": len(pairs),
@@ -332,6 +348,10 @@ def _cmd_bench_merge(args: argparse.Namespace) -> int:
         if "ours" in methods:
             print()
             print(format_scenario_breakdown(rows))
+            breakdown = format_aliasing_breakdown(rows)
+            if breakdown:
+                print()
+                print(breakdown)
     return 0
 
 

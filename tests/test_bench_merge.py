@@ -336,6 +336,13 @@ def test_cli_bench_merge_prints_the_table_and_writes_rows(tmp_path, monkeypatch,
     assert "| | stub |" in printed
     saved = json.loads(out.read_text())
     assert len(saved["rows"]) == 4 and saved["summary"]["stub"]["wrong"] >= 1
+    labels = {row["pair_id"]: row["aliasing"] for row in saved["rows"]}
+    assert all(
+        (label in ("clear", "close", "misleading")) == pair.overlapping()
+        for pair, label in zip(pairs, labels.values(), strict=True)
+    )
+    assert main([*argv, "--cache", str(tmp_path), "--json", "--no-aliasing"]) == 0
+    assert json.loads(capsys.readouterr().out)["summary"]["stub"]["aliasing_labelled"] is False
     assert main([*argv, "--cache", str(tmp_path), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["summary"]["stub"]["pairs"] == 4
 
