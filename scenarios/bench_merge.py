@@ -1244,7 +1244,7 @@ def format_aliasing_breakdown(
     if dominated:
         counts = " | ".join(str(sum(r["outcome"] == o for r in dominated)) for o in outcomes)
         lines.append(
-            f"| of all these, a wrong placement overlaps more with no more conflicts "
+            f"| of all these, a wrong placement overlaps as much or more, no more conflicts "
             f"| {len(dominated)} | {counts} |"
         )
     return "\n".join(lines)

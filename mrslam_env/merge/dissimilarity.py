@@ -629,7 +629,8 @@ def dissimilarity(
         psi >= 0 in cells (sum of four mean L1 distances); ``inf`` for the overlap-restricted
         psi when the maps barely overlap under this transform. A class absent from a map
         contributes 0 for its cells; a class absent from the *other* map charges every
-        cell the sentinel distance.
+        cell the sentinel distance (the unrestricted psi adds, for a cell whose image falls
+        outside the other grid, the L1 distance to that grid, as for any class).
 
     Raises
     ------
