@@ -46,6 +46,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -111,10 +112,10 @@ class AliasingConfig:
             "AliasingConfig", "close_ratio", self.close_ratio, 0.0 < self.close_ratio <= 1.0,
             "in (0, 1]",
         )  # fmt: skip
-        if 360.0 / self.rotation_step_deg < 4.0:
-            raise ValueError(
-                f"AliasingConfig.rotation_step_deg must be <= 90, got {self.rotation_step_deg!r}"
-            )
+        require(
+            "AliasingConfig", "rotation_step_deg", self.rotation_step_deg,
+            self.rotation_step_deg <= 90.0, "<= 90",
+        )  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -161,17 +162,16 @@ class Aliasing:
         }
 
     @classmethod
-    def from_json(cls, data: dict[str, object]) -> Aliasing:
-        rival = data["rival"]
-        ratio = data["ratio"]
+    def from_json(cls, data: dict[str, Any]) -> Aliasing:
+        rival, ratio = data["rival"], data["ratio"]
         return cls(
-            truth_score=float(data["truth_score"]),  # type: ignore[arg-type]
-            rival_score=float(data["rival_score"]),  # type: ignore[arg-type]
+            truth_score=float(data["truth_score"]),
+            rival_score=float(data["rival_score"]),
             rival=None if rival is None else np.asarray(rival, dtype=np.float64),
-            ratio=math.inf if ratio is None else float(ratio),  # type: ignore[arg-type]
+            ratio=math.inf if ratio is None else float(ratio),
             label=str(data["label"]),
-            truth_overlap=float(data["truth_overlap"]),  # type: ignore[arg-type]
-            truth_conflicts=float(data["truth_conflicts"]),  # type: ignore[arg-type]
+            truth_overlap=float(data["truth_overlap"]),
+            truth_conflicts=float(data["truth_conflicts"]),
             dominated=bool(data["dominated"]),
         )
 
@@ -190,10 +190,6 @@ def _masks(
         occupied.astype(np.float64),
         far.astype(np.float64),
     )
-
-
-def _pooled(grid: GridMap, resolution: float) -> GridMap:
-    return grid if math.isclose(grid.resolution, resolution) else resample_map(grid, resolution)
 
 
 def _rendered(
@@ -223,7 +219,7 @@ def placement_score(
     2 resampled onto map 1's search grid as :func:`aliasing` does."""
     config = config or AliasingConfig()
     res = config.resolution
-    g1 = _pooled(m1, res)
+    g1 = resample_map(m1, res)
     origin1 = np.asarray(g1.origin, dtype=np.float64)
     placement = np.asarray(map1_from_map2, dtype=np.float64)
     cells2, offset = _rendered(m2, placement, origin1, res)
@@ -272,7 +268,7 @@ def aliasing(
             raise ValueError(f"{name} has no known (free or occupied) cell")
     res = config.resolution
     truth = np.asarray(map1_from_map2, dtype=np.float64)
-    g1 = _pooled(m1, res)
+    g1 = resample_map(m1, res)
     origin1 = np.asarray(g1.origin, dtype=np.float64)
     known1, occupied1, far1 = _masks(g1.cells, res, config.wall_tolerance)
     reach = math.ceil(math.hypot(*m2.shape) * m2.resolution / res) + 2
