@@ -46,7 +46,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -59,6 +59,9 @@ from mrslam_env.merge.fuse import resample_map
 from mrslam_env.validation import check_fields, require
 from scenarios.bench_merge import MergePair, grid_footprint, resample_cells
 
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
 FloatArray = NDArray[np.float64]
 
 __all__ = [
@@ -66,7 +69,10 @@ __all__ = [
     "Aliasing",
     "AliasingConfig",
     "aliasing",
+    "cached_per_pair",
+    "config_key",
     "load_or_compute_aliasing",
+    "placement_counts",
     "placement_score",
 ]
 
@@ -218,6 +224,16 @@ def placement_score(
     """The score (module docstring) of one placement, counted directly (no FFT), with map
     2 resampled onto map 1's search grid as :func:`aliasing` does."""
     config = config or AliasingConfig()
+    overlap, conflicts = placement_counts(m1, m2, map1_from_map2, config)
+    return overlap - config.conflict_weight * conflicts
+
+
+def placement_counts(
+    m1: GridMap, m2: GridMap, map1_from_map2: FloatArray, config: AliasingConfig | None = None
+) -> tuple[float, float]:
+    """Overlap and conflicts (cells of the search grid) of one placement, counted as
+    :func:`placement_score` counts them."""
+    config = config or AliasingConfig()
     res = config.resolution
     g1 = resample_map(m1, res)
     origin1 = np.asarray(g1.origin, dtype=np.float64)
@@ -231,12 +247,12 @@ def placement_score(
     r0, c0 = max(0, -dr), max(0, -dc)
     r1, c1 = min(cells2.shape[0], rows1 - dr), min(cells2.shape[1], cols1 - dc)
     if r1 <= r0 or c1 <= c0:
-        return 0.0
+        return 0.0, 0.0
     on1 = np.s_[r0 + dr : r1 + dr, c0 + dc : c1 + dc]
     on2 = np.s_[r0:r1, c0:c1]
     overlap = float(np.sum(known2[on2] * known1[on1]))
     conflicts = float(np.sum(occupied2[on2] * far1[on1] + far2[on2] * occupied1[on1]))
-    return overlap - config.conflict_weight * conflicts
+    return overlap, conflicts
 
 
 def aliasing(
@@ -358,8 +374,9 @@ _CACHE_VERSION = 1
 """Bump when the search or its result changes, so cached results are recomputed."""
 
 
-def _config_key(config: AliasingConfig) -> str:
-    text = json.dumps({"version": _CACHE_VERSION, **asdict(config)}, sort_keys=True)
+def config_key(config: DataclassInstance, version: int = _CACHE_VERSION) -> str:
+    """A short digest of a config dataclass and a cache version, for cache file names."""
+    text = json.dumps({"version": version, **asdict(config)}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:10]
 
 
@@ -373,21 +390,44 @@ def load_or_compute_aliasing(
     """:func:`aliasing` of every overlapping pair, by pair id; read from and written to
     ``folder / "aliasing-<config digest>.json"`` when ``folder`` is given."""
     config = config or AliasingConfig()
-    path = None if folder is None else Path(folder) / f"aliasing-{_config_key(config)}.json"
-    cached: dict[str, Aliasing] = {}
+
+    def compute(pair: MergePair) -> Aliasing:
+        found = aliasing(pair.m1, pair.m2, pair.map1_from_map2, config)
+        if progress is not None:
+            progress(f"aliasing {pair.pair_id}: {found.label} (ratio {found.ratio:.2f})")
+        return found
+
+    return cached_per_pair(
+        [pair for pair in pairs if pair.overlapping()],
+        None if folder is None else Path(folder) / f"aliasing-{config_key(config)}.json",
+        compute,
+        Aliasing.from_json,
+    )
+
+
+class _Cacheable(Protocol):
+    def to_json(self) -> dict[str, object]: ...
+
+
+Result = TypeVar("Result", bound=_Cacheable)
+
+
+def cached_per_pair(
+    pairs: Sequence[MergePair],
+    path: Path | None,
+    compute: Callable[[MergePair], Result],
+    from_json: Callable[[dict[str, Any]], Result],
+) -> dict[str, Result]:
+    """``compute(pair)`` for every pair, by pair id, read from the JSON file ``path`` when
+    it holds the pair and written back to it after each new result (so an interrupted run
+    keeps what it computed)."""
+    cached: dict[str, Result] = {}
     if path is not None and path.exists():
-        cached = {
-            key: Aliasing.from_json(value) for key, value in json.loads(path.read_text()).items()
-        }
-    result: dict[str, Aliasing] = {}
+        cached = {key: from_json(value) for key, value in json.loads(path.read_text()).items()}
+    result: dict[str, Result] = {}
     for pair in pairs:
-        if not pair.overlapping():
-            continue
         if pair.pair_id not in cached:
-            cached[pair.pair_id] = aliasing(pair.m1, pair.m2, pair.map1_from_map2, config)
-            if progress is not None:
-                found = cached[pair.pair_id]
-                progress(f"aliasing {pair.pair_id}: {found.label} (ratio {found.ratio:.2f})")
+            cached[pair.pair_id] = compute(pair)
             if path is not None:
                 path.parent.mkdir(parents=True, exist_ok=True)
                 path.write_text(json.dumps({k: v.to_json() for k, v in cached.items()}, indent=1))

@@ -56,6 +56,12 @@ a wrong placement fits as well as the true one. The CLI labels every overlapping
 only to tell the true placement from the rest (``clear``: the maps single out the truth;
 ``close``; ``misleading``), and the summary adds the success rate on the ``clear`` pairs
 with overlap >= 30 %.
+
+Some pairs no method can decide: :func:`scenarios.twins.world_twin` finds a second start
+in the world from which map 2 would look the same (a point-symmetric building, identical
+rooms), so the same two maps have a second ground truth. The CLI marks those
+``undecidable`` and reports the success rate on the decidable pairs with overlap >= 30 %
+and the ceiling the undecidable ones set.
 """
 
 from __future__ import annotations
@@ -103,6 +109,7 @@ __all__ = [
     "format_aliasing_breakdown",
     "format_merge_table",
     "format_scenario_breakdown",
+    "format_twin_breakdown",
     "generate_pairs",
     "grid_footprint",
     "load_or_generate_pairs",
@@ -1057,7 +1064,11 @@ def summarize(
     cannot tell them apart). When the rows carry an ``aliasing`` label
     (:mod:`scenarios.aliasing`; the CLI adds it), also ``pairs_high_clear`` and
     ``success_rate_high_clear``: the pairs with overlap >= ``high_overlap`` whose maps single
-    out the truth (label ``clear``), and the successes among them.
+    out the truth (label ``clear``), and the successes among them. When the rows carry
+    ``undecidable`` (:mod:`scenarios.twins`; the CLI adds it): ``pairs_high_undecidable``
+    and ``pairs_high_decidable`` (overlap >= ``high_overlap``), the
+    ``success_rate_high_decidable``, and ``wrong_undecidable`` (wrong answers on undecidable
+    pairs, any overlap).
     """
     summary: dict[str, dict[str, Any]] = {}
     for name in methods:
@@ -1065,6 +1076,7 @@ def summarize(
         overlapping = [row for row in mine if row["overlapping"]]
         high = [row for row in overlapping if row["overlap"] >= high_overlap]
         clear = [row for row in high if row.get("aliasing") == "clear"]
+        decidable = [row for row in high if row.get("undecidable") is False]
         none = [row for row in mine if not row["overlapping"]]
         returned = [row for row in overlapping if row["returned"]]
         translation = [row["translation_error"] for row in returned]
@@ -1080,6 +1092,15 @@ def summarize(
             "pairs_high_clear": len(clear),
             "success_rate_high_clear": _rate(
                 sum(r["outcome"] == "success" for r in clear), len(clear)
+            ),
+            "twins_labelled": any(row.get("undecidable") is not None for row in mine),
+            "pairs_high_undecidable": sum(bool(row.get("undecidable")) for row in high),
+            "pairs_high_decidable": len(decidable),
+            "success_rate_high_decidable": _rate(
+                sum(r["outcome"] == "success" for r in decidable), len(decidable)
+            ),
+            "wrong_undecidable": sum(
+                r["outcome"] == "wrong" and bool(r.get("undecidable")) for r in mine
             ),
             "pairs_overlapping": len(overlapping),
             "success_rate_overlapping": _rate(
@@ -1143,6 +1164,17 @@ def format_merge_table(
                     )
                 ]
                 if first.get("aliasing_labelled")
+                else []
+            ),
+            *(
+                [
+                    (
+                        f"success, overlap ≥ {100 * high_overlap:.0f}%, decidable pairs "
+                        f"(n={first['pairs_high_decidable']})",
+                        lambda s: _percent(s["success_rate_high_decidable"]),
+                    )
+                ]
+                if first.get("twins_labelled")
                 else []
             ),
             (
@@ -1246,6 +1278,47 @@ def format_aliasing_breakdown(
         lines.append(
             f"| of all these, a wrong placement overlaps as much or more, no more conflicts "
             f"| {len(dominated)} | {counts} |"
+        )
+    return "\n".join(lines)
+
+
+def format_twin_breakdown(
+    rows: Sequence[dict[str, Any]], method: str = "ours", *, high_overlap: float = 0.3
+) -> str:
+    """Outcomes of one method on the pairs whose maps arise from a second start too
+    (``undecidable``, :mod:`scenarios.twins`) and on the rest, as a markdown table with the
+    success ceiling they set; empty when the rows carry no such label."""
+    mine = [r for r in rows if r["method"] == method and r.get("undecidable") is not None]
+    if not mine:
+        return ""
+    outcomes = ("success", "refused", "wrong", "correct_refusal")
+    lines = [
+        f"| {method}: can the maps decide? | pairs | "
+        + " | ".join(o.replace("_", " ") for o in outcomes)
+        + " |",
+        "| --- | ---: |" + " ---: |" * len(outcomes),
+    ]
+    high = [r for r in mine if r["overlapping"] and r["overlap"] >= high_overlap]
+    groups = (
+        (f"overlap ≥ {100 * high_overlap:.0f}%, decidable", high, False),
+        (f"overlap ≥ {100 * high_overlap:.0f}%, undecidable", high, True),
+        (
+            f"overlap < {100 * high_overlap:.0f}%, undecidable",
+            [r for r in mine if r["overlapping"] and r["overlap"] < high_overlap],
+            True,
+        ),
+        ("no overlap, undecidable", [r for r in mine if not r["overlapping"]], True),
+    )
+    for label, group, undecidable in groups:
+        members = [r for r in group if bool(r["undecidable"]) == undecidable]
+        counts = " | ".join(str(sum(r["outcome"] == o for r in members)) for o in outcomes)
+        lines.append(f"| {label} | {len(members)} | {counts} |")
+    if high:
+        share = sum(not r["undecidable"] for r in high) / len(high)
+        lines.append(
+            f"\nUndecidable: the same two maps arise from a second pair of starts with another "
+            f"ground truth. Refusing those, no method passes {_percent(share)} at overlap "
+            f"≥ {100 * high_overlap:.0f}%; merging one is a wrong answer on its twin."
         )
     return "\n".join(lines)
 

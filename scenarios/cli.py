@@ -118,8 +118,9 @@ def _build_parser() -> argparse.ArgumentParser:
     merge.add_argument(
         "--no-aliasing",
         action="store_true",
-        help="skip the exhaustive placement search that labels how well each pair's maps "
-        "single out the truth (a few seconds a pair, cached with the pairs)",
+        help="skip the exhaustive placement searches that label how well each pair's maps "
+        "single out the truth and which pairs no method can decide (a few seconds a pair "
+        "each, cached with the pairs)",
     )
     merge.add_argument("--out", type=Path, help="per-pair results: .csv, else JSON")
     merge.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -299,12 +300,14 @@ def _cmd_bench_merge(args: argparse.Namespace) -> int:
         format_aliasing_breakdown,
         format_merge_table,
         format_scenario_breakdown,
+        format_twin_breakdown,
         load_or_generate_pairs,
         resolve_methods,
         run_merge_benchmark,
         summarize,
         write_rows,
     )
+    from scenarios.twins import load_or_compute_world_twins
 
     names = [name.strip() for name in args.methods.split(",") if name.strip()]
     if not names:
@@ -329,6 +332,11 @@ def _cmd_bench_merge(args: argparse.Namespace) -> int:
             row["aliasing"] = None if found is None else found.label
             row["aliasing_ratio"] = None if found is None else found.ratio
             row["aliasing_dominated"] = None if found is None else found.dominated
+        twins = load_or_compute_world_twins(pairs, folder, progress=progress)
+        for row in rows:
+            twin = twins.get(row["pair_id"])
+            row["undecidable"] = None if twin is None else twin.undecidable
+            row["twin_overlap"] = None if twin is None else twin.twin_overlap
     summary = summarize(rows, list(methods))
     generation = {
         "pairs": len(pairs),
@@ -348,10 +356,10 @@ def _cmd_bench_merge(args: argparse.Namespace) -> int:
         if "ours" in methods:
             print()
             print(format_scenario_breakdown(rows))
-            breakdown = format_aliasing_breakdown(rows)
-            if breakdown:
-                print()
-                print(breakdown)
+            for breakdown in (format_aliasing_breakdown(rows), format_twin_breakdown(rows)):
+                if breakdown:
+                    print()
+                    print(breakdown)
     return 0
 
 

@@ -347,6 +347,32 @@ def test_cli_bench_merge_prints_the_table_and_writes_rows(tmp_path, monkeypatch,
     assert json.loads(capsys.readouterr().out)["summary"]["stub"]["pairs"] == 4
 
 
+def test_cli_bench_merge_marks_undecidable_pairs(tmp_path, monkeypatch, capsys) -> None:
+    from scenarios import twins
+    from scenarios.twins import WorldTwin
+
+    pairs = synthetic_pairs()
+    monkeypatch.setattr(
+        bench_merge,
+        "load_or_generate_pairs",
+        lambda config, cache, **kwargs: (pairs, {"generation_seconds": 1.0, "shortfall": 0}),
+    )
+    monkeypatch.setattr(bench_merge, "_METHODS", {"ours": (lambda m1, m2, rng: None, ())})
+    twin = WorldTwin(undecidable=True, twin=np.zeros(3), twin_overlap=0.4, truth_conflicts=0.0)
+    monkeypatch.setattr(
+        twins, "load_or_compute_world_twins", lambda pairs, folder, **kwargs: {"000-a": twin}
+    )
+    out = tmp_path / "rows.json"
+    argv = ["bench", "merge", "--pairs", "4", "--methods", "ours", "--cache", str(tmp_path)]
+    assert main([*argv, "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "| overlap ≥ 30%, undecidable | 1 | 0 | 1 | 0 | 0 |" in printed
+    assert "success, overlap ≥ 30%, decidable pairs (n=0)" in printed
+    rows = {row["pair_id"]: row for row in json.loads(out.read_text())["rows"]}
+    assert rows["000-a"]["undecidable"] is True and rows["000-a"]["twin_overlap"] == 0.4
+    assert rows["001-b"]["undecidable"] is None
+
+
 def test_features_method_is_skipped_without_opencv(monkeypatch) -> None:
     monkeypatch.setitem(sys.modules, "cv2", None)  # makes `import cv2` fail
     runnable, skipped = resolve_methods(["features"])
