@@ -158,6 +158,22 @@ def test_partial_overlap_is_merged_within_tolerance(overlapping: MergedPair) -> 
     assert rotation <= ONE_DEGREE, f"{math.degrees(rotation):.3f} deg"
 
 
+def test_a_small_loose_overlap_is_refused() -> None:
+    scenario, centre1, centre2, truth = OVERLAPPING[sorted(OVERLAPPING)[0]]
+    m1, m2 = map_pair(scenario, centre1, centre2, np.array(truth))
+    merged = merge_maps(m1, m2, rng=SEED)
+    assert merged.merged and merged.chosen is not None, merged.reason
+    # Count the whole overlap as small, and demand a tighter fit than the chosen one.
+    strict = MergeConfig(small_overlap_area=1e6, small_overlap_max_psi=merged.chosen.psi / 2)
+    refused = merge_maps(m1, m2, strict, rng=SEED)
+    assert refused.transform is None
+    assert refused.reason.startswith("no confident merge: the best transform overlaps only")
+    assert "fits loosely" in refused.reason and "\n" not in refused.reason
+    # A fit at least as tight as the chosen one is accepted whatever the overlap.
+    loose = MergeConfig(small_overlap_area=1e6, small_overlap_max_psi=merged.chosen.psi)
+    assert merge_maps(m1, m2, loose, rng=SEED).merged
+
+
 def test_result_reports_ranked_hypotheses_and_timings(overlapping: MergedPair) -> None:
     result = overlapping.result
     assert result.hypotheses and result.chosen is not None
@@ -383,6 +399,8 @@ def test_same_seed_gives_the_same_result(
         ("max_resolution_ratio", 0.5),
         ("min_known_area", 0.0),
         ("min_overlap_area", -3.0),
+        ("small_overlap_area", -1.0),
+        ("small_overlap_max_psi", 0.0),
         ("min_acceptance_index", 1.5),
         ("max_conflict_fraction", -0.01),
         ("ambiguity_ratio", 2.0),
