@@ -135,9 +135,9 @@ class MergeConfig:
     grid). A room fitted onto a similar room, or a dead end onto another, agrees almost
     everywhere on a few m² but leaves walls a cell or two apart; a true small overlap has
     little drift to blur it. On the merge benchmark's 240 pairs this turned two of the
-    seven wrong answers (no-overlap pairs fitted over 3.4-7.3 m² at psi 0.74-0.93) into
-    refusals and cost no success; true merges under 8 m² had psi up to 0.54, while larger
-    true overlaps reach psi 1.0-1.3 (more drift), hence the area limit."""
+    seven wrong answers (no-overlap pairs fitted over 6.3 and 7.3 m² at psi 0.93 and 0.92)
+    into refusals and cost no success; true merges under 8 m² had psi up to 0.53, while
+    larger true overlaps reach psi 1.0-1.3 (more drift), hence the area limit."""
     conflict_weight: float = 10.0
     """Score of a candidate: ``(agree - conflict_weight * conflicts) * cell area`` (m²)."""
     ambiguity_ratio: float = 0.25
