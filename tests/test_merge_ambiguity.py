@@ -1,5 +1,5 @@
-"""The judge's rules for repetitive buildings (issue 4): refutation by a long conflict and
-the aliasing check by symmetry extrapolation.
+"""The judge's rules for repetitive buildings (issue 4): refutation by a long conflict, the
+ambiguity test (:func:`ambiguous_rival`) and the aliasing check by symmetry extrapolation.
 
 - :func:`largest_conflict` measures the longest unbroken stretch of wall lying on open floor;
   it is checked against an obvious per-cell reference on random maps.
@@ -14,6 +14,7 @@ the aliasing check by symmetry extrapolation.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -25,6 +26,7 @@ from mrslam_env.merge.dissimilarity import Agreement, distance_maps, largest_con
 from mrslam_env.merge.pipeline import (
     MergeConfig,
     ScoredHypothesis,
+    ambiguous_rival,
     merge_maps,
     refute,
     relative_transform_error,
@@ -108,7 +110,13 @@ _AGREEMENT = Agreement(
 
 
 def _candidate(
-    x: float, theta: float = 0.0, *, psi: float, length: float, score: float = 10.0
+    x: float,
+    theta: float = 0.0,
+    *,
+    psi: float,
+    length: float,
+    score: float = 10.0,
+    conflicts: int = 5,
 ) -> ScoredHypothesis:
     transform = np.array([x, 0.0, theta])
     return ScoredHypothesis(
@@ -117,7 +125,7 @@ def _candidate(
         support=0.2,
         votes=1,
         psi=psi,
-        agreement=_AGREEMENT,
+        agreement=replace(_AGREEMENT, conflicts=conflicts),
         score=score,
         confident=True,
         conflict_length=length,
@@ -157,6 +165,33 @@ def test_a_lone_candidate_or_its_own_duplicate_never_refutes_it() -> None:
     assert refute([walled, twin], PIVOT, MergeConfig()) == []
 
 
+@pytest.mark.parametrize(
+    ("conflicts", "length", "score", "ambiguous"),
+    [
+        (2, 1.0, 30.0, True),  # a clean rival counts from a quarter of the best score
+        (9, 1.0, 30.0, False),  # 9 >= 3 x (2 + 1) conflicts in a 1 m group: from 0.6
+        (9, 1.0, 62.0, True),
+        (8, 1.0, 30.0, True),  # too few conflicts to be contradicted
+        (9, 0.2, 30.0, True),  # scattered conflicts: no group long enough
+    ],
+    ids=["clean", "contradicted", "contradicted-close", "few-conflicts", "scattered"],
+)
+def test_a_contradicted_rival_counts_only_from_a_higher_ratio(
+    conflicts: int, length: float, score: float, ambiguous: bool
+) -> None:
+    best = _candidate(0.0, psi=0.3, length=0.1, score=100.0, conflicts=2)
+    rival = _candidate(6.0, math.pi, psi=0.6, length=length, score=score, conflicts=conflicts)
+    found = ambiguous_rival([best, rival], PIVOT, MergeConfig())
+    assert (found is rival) if ambiguous else (found is None)
+
+
+def test_a_duplicate_or_unconfident_rival_is_no_ambiguity() -> None:
+    best = _candidate(0.0, psi=0.3, length=0.1, score=100.0)
+    duplicate = _candidate(0.1, psi=0.3, length=0.1, score=99.0)  # 0.1 m away: one answer
+    unsure = replace(_candidate(6.0, psi=0.3, length=0.1, score=90.0), confident=False)
+    assert ambiguous_rival([best, duplicate, unsure], PIVOT, MergeConfig()) is None
+
+
 def test_symmetry_proposals_extrapolate_the_repetition() -> None:
     config = MergeConfig()
     best = _candidate(7.7, psi=0.3, length=0.0, score=50.0)
@@ -191,6 +226,9 @@ def test_symmetry_proposals_skip_duplicates_and_non_positive_scores() -> None:
         ("symmetry_proposals", -1),
         ("clean_conflict_length", -0.1),
         ("refuting_conflict_length", 0.4),
+        ("contradicted_rival_factor", -1.0),
+        ("contradicted_rival_length", math.nan),
+        ("contradicted_rival_ratio", 1.5),
     ],
 )
 def test_new_config_fields_are_validated(field: str, value: object) -> None:

@@ -55,6 +55,7 @@ __all__ = [
     "MergeResult",
     "MergeTrace",
     "ScoredHypothesis",
+    "ambiguous_rival",
     "merge_maps",
     "refine_transform",
     "relative_transform_error",
@@ -146,6 +147,17 @@ class MergeConfig:
     mirrored wings) the wrong placement often overlaps *more* than the right one and
     scores higher, so only "a second consistent answer exists at all" is a safe signal;
     the live system settles such cases by rendezvous instead."""
+    contradicted_rival_factor: float = 3.0
+    """A rival with at least this many times the best candidate's conflicts plus one ..."""
+    contradicted_rival_length: float = 0.3
+    """... whose largest unbroken group of conflicts is at least this long (m) ..."""
+    contradicted_rival_ratio: float = 0.6
+    """... makes the answer ambiguous only from this fraction of the best score, instead of
+    ``ambiguity_ratio``. A part of one map fitted elsewhere (often a wing turned by 180°)
+    leaves a few wall cells on open floor; the true placement of a clean pair leaves none
+    or one or two. On the merge benchmark such rivals (4-19 conflicts, stretches of
+    0.4-1.0 m, 50-70 % of the best score) made ours refuse pairs whose maps single out the
+    truth."""
     distinct_translation: float = 0.5
     """Two transforms are the same answer when they move m2's known centre less than this
     (m) apart ..."""
@@ -193,6 +205,9 @@ class MergeConfig:
             raise ValueError(
                 f"{name}.max_resolution_ratio must be >= 1, got {self.max_resolution_ratio!r}"
             )
+        for attr in ("contradicted_rival_factor", "contradicted_rival_length"):
+            if number(attr) < 0:
+                raise ValueError(f"{name}.{attr} must be >= 0, got {getattr(self, attr)!r}")
         if number("small_overlap_area") < 0:
             raise ValueError(
                 f"{name}.small_overlap_area must be >= 0, got {self.small_overlap_area!r}"
@@ -203,6 +218,7 @@ class MergeConfig:
             "min_acceptance_index",
             "max_conflict_fraction",
             "ambiguity_ratio",
+            "contradicted_rival_ratio",
             "min_correlation_overlap",
         ):
             if not 0.0 <= number(attr) <= 1.0:
@@ -543,6 +559,34 @@ def refute(
     return refuted
 
 
+def ambiguous_rival(
+    scored: list[ScoredHypothesis], pivot: FloatArray, config: MergeConfig
+) -> ScoredHypothesis | None:
+    """The first confident candidate that is a *different* answer from the best one
+    (``scored[0]``, sorted best first) and scores enough to make the answer ambiguous, or
+    None.
+
+    Enough is ``ambiguity_ratio`` of the best score; for a *contradicted* rival (at least
+    ``contradicted_rival_factor`` x (best's conflicts + 1) conflicts, with an unbroken
+    group of at least ``contradicted_rival_length``) it is ``contradicted_rival_ratio``.
+    """
+    best = scored[0]
+    for other in scored[1:]:
+        if not other.confident or same_answer(
+            best.map1_from_map2, other.map1_from_map2, pivot, config
+        ):
+            continue
+        contradicted = (
+            other.agreement.conflicts
+            >= config.contradicted_rival_factor * (best.agreement.conflicts + 1)
+            and other.conflict_length >= config.contradicted_rival_length
+        )
+        ratio = config.contradicted_rival_ratio if contradicted else config.ambiguity_ratio
+        if other.score >= ratio * best.score:
+            return other
+    return None
+
+
 def symmetry_proposals(
     scored: list[ScoredHypothesis], pivot: FloatArray, config: MergeConfig
 ) -> list[FloatArray]:
@@ -744,16 +788,12 @@ def merge_maps(
     best = scored[0]
     if not best.confident:
         return refuse(f"best hypothesis fails: {reasons[0]}")
-    for other in scored[1:]:
-        if (
-            other.confident
-            and not same_answer(best.map1_from_map2, other.map1_from_map2, pivot, config)
-            and other.score >= config.ambiguity_ratio * best.score
-        ):
-            return refuse(
-                "ambiguous: two different transforms fit "
-                f"(scores {best.score:.1f} and {other.score:.1f} m²)"
-            )
+    rival = ambiguous_rival(scored, pivot, config)
+    if rival is not None:
+        return refuse(
+            "ambiguous: two different transforms fit "
+            f"(scores {best.score:.1f} and {rival.score:.1f} m²)"
+        )
     if (
         best.proposed_by == "correlation"
         and best.agreement.overlap_fraction < config.min_correlation_overlap
