@@ -6,7 +6,8 @@ import math
 
 import numpy as np
 import pytest
-from test_aliasing import RES, ROOM, left_room_seen_from, twin_rooms
+from test_aliasing import RES, ROOM, _apply, left_room_seen_from, twin_rooms
+from test_aliasing import _row as aliasing_row
 
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
@@ -136,14 +137,11 @@ def test_results_are_cached_and_pairs_without_starts_left_out(tmp_path, monkeypa
 
 def _row(pair_id: str, outcome: str, undecidable: bool | None, overlap: float = 0.5) -> dict:
     return {
-        "pair_id": pair_id, "scenario": "office", "overlap": overlap,
-        "overlapping": overlap >= 0.02, "method": "ours", "outcome": outcome,
+        **aliasing_row(pair_id, outcome, None, overlap),
+        "overlapping": overlap >= 0.02,
         "returned": outcome in ("success", "wrong"),
-        "translation_error": 0.01 if outcome == "success" else None,
-        "rotation_error_deg": 0.1 if outcome == "success" else None, "seconds": 1.0,
-        "largest_side_cells": 100, "agreement_truth": 1.0, "agreement_estimate": None,
         "undecidable": undecidable,
-    }  # fmt: skip
+    }
 
 
 def test_summary_and_tables_report_decidable_pairs_and_the_ceiling() -> None:
@@ -182,11 +180,4 @@ def _cell(grid, point) -> tuple[int, int]:
     return (
         math.floor((point[1] - grid.origin[1]) / grid.resolution),
         math.floor((point[0] - grid.origin[0]) / grid.resolution),
-    )
-
-
-def _apply(transform: np.ndarray, point: np.ndarray) -> np.ndarray:
-    c, s = math.cos(transform[2]), math.sin(transform[2])
-    return np.array(
-        [c * point[0] - s * point[1] + transform[0], s * point[0] + c * point[1] + transform[1]]
     )
