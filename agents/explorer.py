@@ -1,4 +1,4 @@
-"""Frontier exploration for one robot, and the frontier split for a team (DESIGN §6).
+"""Frontier exploration for one robot, and the frontier split for a team (docs/design.md §6).
 
 :class:`ExplorerPolicy` is the thin stateful shell around the pure steps in
 :mod:`agents.frontiers`, :mod:`agents.planning` and :mod:`agents.follower`:

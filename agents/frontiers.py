@@ -1,4 +1,4 @@
-"""Frontier extraction on an occupancy grid (DESIGN §6, building blocks).
+"""Frontier extraction on an occupancy grid (docs/design.md §6, building blocks).
 
 A frontier is the border between known free space and unknown space: where a robot must go
 to see more (Yamauchi, "A frontier-based approach for autonomous exploration", 1997).

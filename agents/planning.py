@@ -1,4 +1,4 @@
-"""Path planning on an inflated occupancy grid (DESIGN §6, building blocks).
+"""Path planning on an inflated occupancy grid (docs/design.md §6, building blocks).
 
 Three steps, one function each:
 

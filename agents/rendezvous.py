@@ -1,4 +1,4 @@
-"""Rendezvous verification of a merge hypothesis (DESIGN §5 step 5, §6).
+"""Rendezvous verification of a merge hypothesis (docs/design.md §5 step 5, §6).
 
 For a hypothesis ``T = map0_from_map1`` and the robots' current SLAM poses ``p0`` (in map
 0) and ``p1`` (in map 1), robot 1 should stand at ``T3 = p0⁻¹ · T · p1`` in robot 0's body

@@ -1,4 +1,4 @@
-"""The team coordinator: the paper's four kinds of interaction as a state machine (DESIGN §6).
+"""The team coordinator: the paper's four interaction kinds as a state machine (design §6).
 
 ==========================  ==================================================================
 state                       what the robots do

@@ -15,7 +15,7 @@ Observation            ``Dict`` (below)
 Two (or N) differential-drive robots with 360° lidars move in a static 2-D world simulated
 with pymunk. Each robot starts at a pose nobody tells the others: its odometry and, later,
 its map are in its own frame. They can detect each other (peer sensor) and talk (comm link)
-only when close; see DESIGN.md for the whole research setting.
+only when close; see docs/design.md for the whole research setting.
 
 Actions
 -------
@@ -111,13 +111,13 @@ from mrslam_env import ENV_ID
 from mrslam_env.config import EnvConfig
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import GridMap
+from mrslam_env.registry import build_world
 from mrslam_env.sim.simulator import SimState, Simulator
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
 from mrslam_env.slam.local_map import local_map
 from mrslam_env.slam.raycast import mark_scan_observed
 from mrslam_env.slam.scan import mask_returns_near, sighted_positions
 from mrslam_env.slam.slam import RobotSlam
-from mrslam_env.worlds import build_world
 
 __all__ = ["MultiRobotSlamEnv", "env", "parallel_env"]
 

@@ -1,4 +1,4 @@
-"""SE(2) poses and grid/world conversions, used everywhere (DESIGN §2).
+"""SE(2) poses and grid/world conversions, used everywhere (docs/design.md §2).
 
 A pose or rigid transform is a float64 array ``(x, y, theta)`` in metres and radians,
 theta wrapped to (-pi, pi]. Transforms are named by frames: ``map1_from_map2`` maps points

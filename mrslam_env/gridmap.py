@@ -1,4 +1,4 @@
-"""A trinary occupancy grid with its place in the world (DESIGN §2).
+"""A trinary occupancy grid with its place in the world (docs/design.md §2).
 
 ``GridMap`` is the exchange type between the simulator's ground truth, map files
 (:mod:`mrslam_env.mapio`), SLAM's trinary view and map merging. Cell values follow ROS
@@ -7,18 +7,21 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mrslam_env.geometry import cell_to_world, world_to_cell
+from mrslam_env.geometry import cell_to_world, inverse, world_to_cell
 
 FREE = np.int8(0)
 OCCUPIED = np.int8(100)
 UNKNOWN = np.int8(-1)
 
-__all__ = ["FREE", "OCCUPIED", "UNKNOWN", "GridMap"]
+__all__ = ["FREE", "OCCUPIED", "UNKNOWN", "GridMap", "grid_footprint", "resample_cells"]
+
+FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True, slots=True, kw_only=True, eq=False)
@@ -93,3 +96,52 @@ class GridMap:
     @property
     def unknown(self) -> NDArray[np.bool_]:
         return self.cells == UNKNOWN
+
+
+def resample_cells(
+    source: GridMap,
+    target_from_source: FloatArray,
+    origin: tuple[float, float],
+    shape: tuple[int, int],
+    resolution: float,
+) -> NDArray[np.int8]:
+    """Resample a grid (nearest cell) onto a raster in another frame.
+
+    Parameters
+    ----------
+    source : GridMap
+        The grid, in its own frame.
+    target_from_source : ndarray (3,)
+        Pose of the source frame in the target frame.
+    origin, shape, resolution
+        The target raster: outer corner of its cell [0, 0] (m, target frame), (rows, cols),
+        cell size (m).
+
+    Returns
+    -------
+    ndarray of int8, shape ``shape``
+        The source cell under each target cell centre; UNKNOWN outside the source grid.
+    """
+    rows, cols = shape
+    xs = origin[0] + (np.arange(cols) + 0.5) * resolution
+    ys = origin[1] + (np.arange(rows) + 0.5) * resolution
+    source_from_target = inverse(target_from_source)
+    c, s = math.cos(source_from_target[2]), math.sin(source_from_target[2])
+    # Points in the source frame, separably: x_s = c x - s y + tx, y_s = s x + c y + ty.
+    px = c * xs[None, :] - s * ys[:, None] + source_from_target[0]
+    py = s * xs[None, :] + c * ys[:, None] + source_from_target[1]
+    ix = np.floor((px - source.origin[0]) / source.resolution).astype(np.int64)
+    iy = np.floor((py - source.origin[1]) / source.resolution).astype(np.int64)
+    src_rows, src_cols = source.shape
+    inside = (ix >= 0) & (ix < src_cols) & (iy >= 0) & (iy < src_rows)
+    cells = np.full(shape, UNKNOWN, dtype=np.int8)
+    cells[inside] = source.cells[iy[inside], ix[inside]]
+    return cells
+
+
+def grid_footprint(grid: GridMap, frame_from_grid: FloatArray) -> FloatArray:
+    """Corners (4, 2) of a grid's extent in another frame."""
+    xmin, ymin, xmax, ymax = grid.extent
+    corners = np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])
+    c, s = math.cos(frame_from_grid[2]), math.sin(frame_from_grid[2])
+    return corners @ np.array([[c, s], [-s, c]]) + frame_from_grid[:2]

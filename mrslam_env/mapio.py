@@ -1,4 +1,4 @@
-"""Read and write ROS ``map_server`` map files (DESIGN §2).
+"""Read and write ROS ``map_server`` map files (docs/design.md §2).
 
 A map is a YAML file naming an image (relative to the YAML's folder) plus the image::
 

@@ -1,4 +1,4 @@
-"""The Rerun sink: one :class:`Recorder` writes one ``.rrd`` file (DESIGN §7).
+"""The Rerun sink: one :class:`Recorder` writes one ``.rrd`` file (docs/design.md §7).
 
 This is the only module of the project that imports :mod:`rerun`. It logs through an
 explicit :class:`rerun.RecordingStream` (never the global one), saves straight to a file
@@ -28,7 +28,7 @@ Timelines: ``step`` (sequence) and ``sim_time`` (duration, seconds). Wall-clock
 Frames and the y axis
 ---------------------
 Every spatial root (``world``, ``robot_i``, ``merge``, ``rendezvous``, ``team``) holds data
-in its own right-handed, **y-up** frame, exactly as DESIGN §2 defines it: points are logged
+in its own right-handed, **y-up** frame, exactly as docs/design.md §2 defines it: points are logged
 as they are, never negated. Rerun's 2-D view draws +y *down*, so each root carries one
 static ``Transform3D``, a rotation of pi about the x axis, which turns (x right, y up,
 z towards the viewer) into the 2-D view's (x right, y down, z into the screen). The
@@ -77,7 +77,7 @@ __all__ = [
 #: Root entities that hold y-up spatial data besides ``robot_i``.
 SPATIAL_ROOTS: Final = ("world", "merge", "rendezvous", "team")
 
-# ROS map_server grey levels (DESIGN §2), so a recorded map looks like the map file.
+# ROS map_server grey levels (docs/design.md §2), so a recorded map looks like the map file.
 _GREY_FREE: Final = 254
 _GREY_OCCUPIED: Final = 0
 _GREY_UNKNOWN: Final = 205
@@ -195,7 +195,7 @@ def scan_hits_world(
 
 
 def default_blueprint(n_robots: int) -> rrb.Blueprint:
-    """The default viewer layout (DESIGN §7).
+    """The default viewer layout (docs/design.md §7).
 
     Top row: the world (ground truth, true poses, scans), the merge stages, the team
     (merged map, rendezvous). Middle row: one view per robot's own map frame. Bottom row:

@@ -1,1 +1,1 @@
-"""Worlds, experiment definitions, the experiment runner and the ``mrslam`` CLI."""
+"""The composition root: worlds, the end-to-end experiment, the `mrslam` CLI and benchmarks."""

@@ -128,7 +128,7 @@ def _build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from scenarios.runner import RunConfig, run_experiment
+    from scenarios.experiment import RunConfig, run_experiment
 
     config = RunConfig(
         scenario=args.scenario,
@@ -196,7 +196,7 @@ def _cmd_merge(args: argparse.Namespace) -> int:
 
 
 def _cmd_scenarios(args: argparse.Namespace) -> int:
-    from mrslam_env.worlds import available_scenarios, build_world
+    from mrslam_env.registry import available_scenarios, build_world
 
     if args.export:
         from mrslam_env.mapio import save_map
@@ -230,8 +230,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         return _cmd_bench_merge(args)
     if args.bench == "explore":
         return _cmd_bench_explore(args)
-    from mrslam_env.worlds import available_scenarios, build_world
-    from scenarios.bench import bench_sim
+    from mrslam_env.registry import available_scenarios, build_world
+    from scenarios.bench.sim import bench_sim
 
     names = args.scenarios or [
         ("procedural-0" if s.parametric else key)
@@ -255,7 +255,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_slam(args: argparse.Namespace) -> int:
-    from scenarios.bench_slam import (
+    from scenarios.bench.slam import (
         DEFAULT_SCENARIOS,
         format_slam_table,
         run_slam_benchmark,
@@ -271,7 +271,7 @@ def _cmd_bench_slam(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_explore(args: argparse.Namespace) -> int:
-    from scenarios.bench_explore import (
+    from scenarios.bench.explore import (
         DEFAULT_SCENARIOS,
         format_explore_table,
         run_explore_benchmark,
@@ -294,20 +294,19 @@ def _cmd_bench_explore(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_merge(args: argparse.Namespace) -> int:
-    from scenarios.aliasing import load_or_compute_aliasing
-    from scenarios.bench_merge import (
-        PairGenerationConfig,
+    from scenarios.bench.merge.aliasing import load_or_compute_aliasing
+    from scenarios.bench.merge.methods import resolve_methods
+    from scenarios.bench.merge.pairs import PairGenerationConfig, load_or_generate_pairs
+    from scenarios.bench.merge.report import (
         format_aliasing_breakdown,
         format_merge_table,
         format_scenario_breakdown,
         format_twin_breakdown,
-        load_or_generate_pairs,
-        resolve_methods,
-        run_merge_benchmark,
         summarize,
         write_rows,
     )
-    from scenarios.twins import load_or_compute_world_twins
+    from scenarios.bench.merge.run import run_merge_benchmark
+    from scenarios.bench.merge.twins import load_or_compute_world_twins
 
     names = [name.strip() for name in args.methods.split(",") if name.strip()]
     if not names:

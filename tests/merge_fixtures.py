@@ -14,11 +14,11 @@ from scipy import ndimage
 
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import GridMap
+from mrslam_env.registry import build_world
 from mrslam_env.sim.lidar import cast_scan
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
 from mrslam_env.slam.config import GridConfig
 from mrslam_env.slam.grid import OccupancyGrid
-from mrslam_env.worlds import build_world
 
 NO_DISCS = np.zeros((0, 3))
 

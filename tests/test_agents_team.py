@@ -20,7 +20,7 @@ from mrslam_env.env import MultiRobotSlamEnv
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.merge.pipeline import MergeConfig
-from scenarios.runner import _MapCache
+from scenarios.experiment import _MapCache
 
 # Both robots in the office corridor (y 7..9), 5 m apart, facing each other: in comm
 # range, in each other's sight once they move.

@@ -8,22 +8,17 @@ import numpy as np
 import pytest
 
 from mrslam_env.geometry import compose, inverse
-from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
-from scenarios import aliasing as aliasing_module
-from scenarios.aliasing import (
+from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap, resample_cells
+from scenarios.bench.merge import aliasing as aliasing_module
+from scenarios.bench.merge.aliasing import (
     Aliasing,
     AliasingConfig,
     aliasing,
     load_or_compute_aliasing,
     placement_score,
 )
-from scenarios.bench_merge import (
-    MergePair,
-    format_aliasing_breakdown,
-    format_merge_table,
-    resample_cells,
-    summarize,
-)
+from scenarios.bench.merge.pairs import MergePair
+from scenarios.bench.merge.report import format_aliasing_breakdown, format_merge_table, summarize
 
 RES = 0.05
 ROOM = 120  # cells (6 m) between the two rooms' left walls

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from scenarios.bench_explore import _summarise, format_explore_table, run_explore_benchmark
+from scenarios.bench.explore import _summarise, format_explore_table, run_explore_benchmark
 
 
 def test_a_tiny_benchmark_pairs_coordinated_and_independent_runs() -> None:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mrslam_env.sim.world import WorldSpec, box
-from scenarios.bench_irsim import build_irsim_env, irsim_available, irsim_steps_per_second
+from scenarios.bench.irsim import build_irsim_env, irsim_available, irsim_steps_per_second
 
 pytestmark = pytest.mark.skipif(not irsim_available(), reason="ir-sim is not installed")
 

@@ -10,30 +10,23 @@ import numpy as np
 import pytest
 from merge_fixtures import poses_near, scan_map
 
+from mrslam_env.evaluation import cell_agreement, pose_errors, true_overlap
 from mrslam_env.geometry import compose, inverse, transform_points
-from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
-from mrslam_env.worlds import build_world
-from scenarios import bench_merge
-from scenarios.bench_merge import (
+from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap, resample_cells
+from mrslam_env.registry import build_world
+from scenarios.bench.merge import methods as merge_methods
+from scenarios.bench.merge import pairs as merge_pairs
+from scenarios.bench.merge.methods import RandomWalkBaselineConfig, resolve_methods
+from scenarios.bench.merge.pairs import (
     MergePair,
     PairGenerationConfig,
-    RandomWalkBaselineConfig,
-    Tolerance,
-    cell_agreement,
-    classify_outcome,
-    format_merge_table,
     load_or_generate_pairs,
     merge_pair_from_runs,
-    pose_errors,
     reachable_starts,
-    resample_cells,
-    resolve_methods,
-    run_merge_benchmark,
     simulate_run,
-    summarize,
-    true_overlap,
-    write_rows,
 )
+from scenarios.bench.merge.report import format_merge_table, summarize, write_rows
+from scenarios.bench.merge.run import Tolerance, classify_outcome, run_merge_benchmark
 from scenarios.cli import main
 
 TRUTH = np.array([1.0, -2.0, 0.5])
@@ -162,7 +155,7 @@ def test_generate_pairs_caches_a_manifest(tmp_path, monkeypatch) -> None:
     pairs, manifest = load_or_generate_pairs(config, tmp_path)
     folder = tmp_path / config.cache_key()
     saved = json.loads((folder / "manifest.json").read_text())
-    assert saved["generator_version"] == bench_merge.GENERATOR_VERSION
+    assert saved["generator_version"] == merge_pairs.GENERATOR_VERSION
     assert len(pairs) + manifest["shortfall"] == 3
     assert len(pairs) >= 1
     for pair, entry in zip(pairs, saved["pairs"], strict=True):
@@ -178,7 +171,7 @@ def test_generate_pairs_caches_a_manifest(tmp_path, monkeypatch) -> None:
     def refuse(*args, **kwargs):
         raise AssertionError("regenerated cached pairs")
 
-    monkeypatch.setattr(bench_merge, "generate_pairs", refuse)
+    monkeypatch.setattr(merge_pairs, "generate_pairs", refuse)
     again, _ = load_or_generate_pairs(config, tmp_path)
     assert [p.pair_id for p in again] == [p.pair_id for p in pairs]
     np.testing.assert_array_equal(again[0].m1.cells, pairs[0].m1.cells)
@@ -292,7 +285,7 @@ def test_cli_bad_input_exits_2(capsys) -> None:
 
 def test_features_baseline_recovers_a_rotated_shifted_copy() -> None:
     pytest.importorskip("cv2")
-    from scenarios.merge_baselines import estimate_transform_features
+    from scenarios.bench.merge.features import estimate_transform_features
 
     world = build_world("office")
     rng = np.random.default_rng(0)
@@ -309,7 +302,7 @@ def test_features_baseline_recovers_a_rotated_shifted_copy() -> None:
 
 def test_features_baseline_refuses_unrelated_maps() -> None:
     pytest.importorskip("cv2")
-    from scenarios.merge_baselines import estimate_transform_features
+    from scenarios.bench.merge.features import estimate_transform_features
 
     empty = GridMap(cells=np.full((50, 50), UNKNOWN, dtype=np.int8), resolution=0.05)
     result = estimate_transform_features(room_map(), empty)
@@ -326,8 +319,8 @@ def test_cli_bench_merge_prints_the_table_and_writes_rows(tmp_path, monkeypatch,
     def stub(m1: GridMap, m2: GridMap, rng: np.random.Generator):
         return np.zeros(3)
 
-    monkeypatch.setattr(bench_merge, "load_or_generate_pairs", load)
-    monkeypatch.setattr(bench_merge, "_METHODS", {"stub": (stub, ())})
+    monkeypatch.setattr(merge_pairs, "load_or_generate_pairs", load)
+    monkeypatch.setattr(merge_methods, "_METHODS", {"stub": (stub, ())})
     out = tmp_path / "rows.json"
     argv = ["bench", "merge", "--pairs", "4", "--seed", "5", "--methods", "stub"]
     assert main([*argv, "--cache", str(tmp_path), "--out", str(out)]) == 0
@@ -348,16 +341,16 @@ def test_cli_bench_merge_prints_the_table_and_writes_rows(tmp_path, monkeypatch,
 
 
 def test_cli_bench_merge_marks_undecidable_pairs(tmp_path, monkeypatch, capsys) -> None:
-    from scenarios import twins
-    from scenarios.twins import WorldTwin
+    from scenarios.bench.merge import twins
+    from scenarios.bench.merge.twins import WorldTwin
 
     pairs = synthetic_pairs()
     monkeypatch.setattr(
-        bench_merge,
+        merge_pairs,
         "load_or_generate_pairs",
         lambda config, cache, **kwargs: (pairs, {"generation_seconds": 1.0, "shortfall": 0}),
     )
-    monkeypatch.setattr(bench_merge, "_METHODS", {"ours": (lambda m1, m2, rng: None, ())})
+    monkeypatch.setattr(merge_methods, "_METHODS", {"ours": (lambda m1, m2, rng: None, ())})
     twin = WorldTwin(undecidable=True, twin=np.zeros(3), twin_overlap=0.4, truth_conflicts=0.0)
     monkeypatch.setattr(
         twins, "load_or_compute_world_twins", lambda pairs, folder, **kwargs: {"000-a": twin}
@@ -389,7 +382,7 @@ def test_random_initial_transform_lands_on_map1() -> None:
     known2 = grid.cell_to_world(np.argwhere(grid.cells != UNKNOWN)).mean(axis=0)
     thetas = []
     for _ in range(20):
-        transform = bench_merge._random_initial_transform(grid, grid, rng)
+        transform = merge_methods._random_initial_transform(grid, grid, rng)
         centroid = transform_points(transform, known2[None])
         assert grid.contains(grid.world_to_cell(centroid)).all()
         thetas.append(transform[2])
@@ -406,17 +399,17 @@ def test_random_walk_baseline_returns_only_accepted_transforms() -> None:
     m2 = warped_copy(m1, np.array([1.5, -0.8, 2.0]))
     config = RandomWalkBaselineConfig(starts=3)
     for seed in range(2):
-        estimate = bench_merge.method_random_walk(m1, m2, np.random.default_rng(seed), config)
+        estimate = merge_methods.method_random_walk(m1, m2, np.random.default_rng(seed), config)
         if estimate is not None:
             agreement = acceptance_index(m1, m2, estimate)
             assert agreement.index >= config.acceptance_threshold
             assert agreement.overlap_fraction >= config.min_overlap_fraction
     empty = GridMap(cells=np.full((20, 20), UNKNOWN, dtype=np.int8), resolution=0.05)
-    assert bench_merge.method_random_walk(m1, empty, np.random.default_rng(0)) is None
+    assert merge_methods.method_random_walk(m1, empty, np.random.default_rng(0)) is None
 
 
 def test_scenario_breakdown_counts_outcomes_per_world() -> None:
-    from scenarios.bench_merge import format_scenario_breakdown
+    from scenarios.bench.merge.report import format_scenario_breakdown
 
     rows = [
         {"method": "ours", "scenario": "maze", "outcome": "success"},

@@ -14,7 +14,7 @@ from test_recording import Recording
 
 from mrslam_env.gridmap import FREE, OCCUPIED
 from mrslam_env.mapio import load_map
-from mrslam_env.worlds import build_world
+from mrslam_env.registry import build_world
 from scenarios.cli import main
 
 

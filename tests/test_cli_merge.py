@@ -1,4 +1,4 @@
-"""``mrslam merge MAP1.yaml MAP2.yaml [-o merged.yaml] [--json] [--seed N]`` (DESIGN §8).
+"""``mrslam merge MAP1.yaml MAP2.yaml [-o merged.yaml] [--json] [--seed N]`` (docs/design.md §8).
 
 Run in-process through ``scenarios.cli.main`` on ROS map files written with
 :func:`mrslam_env.mapio.save_map`: the exit status (0 merged, 3 no confident merge, 2 bad

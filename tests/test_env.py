@@ -15,9 +15,9 @@ from mrslam_env.config import EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv, env, parallel_env
 from mrslam_env.gridmap import OCCUPIED
 from mrslam_env.mapio import load_map, save_map
+from mrslam_env.registry import UnknownScenarioError, available_scenarios
 from mrslam_env.sim.world import WorldSpec, box, ground_truth_map
-from mrslam_env.worlds import UnknownScenarioError, available_scenarios
-from scenarios.bench import driving_commands
+from scenarios.bench.sim import driving_commands
 
 
 def scenario_names() -> list[str]:

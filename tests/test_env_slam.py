@@ -10,11 +10,11 @@ import pytest
 from agents.wander import WanderPolicy
 from mrslam_env.config import EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
+from mrslam_env.evaluation import map_agreement
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import UNKNOWN
 from mrslam_env.sim.world import WorldSpec, box, ground_truth_map
 from mrslam_env.slam.config import SlamConfig
-from mrslam_env.slam.evaluation import map_agreement
 from mrslam_env.slam.local_map import FREE_CHANNEL, OCCUPIED_CHANNEL
 
 

@@ -1,4 +1,4 @@
-"""SE(2) algebra, angle wrapping and the grid/world convention of DESIGN §2."""
+"""SE(2) algebra, angle wrapping and the grid/world convention of docs/design.md §2."""
 
 from __future__ import annotations
 

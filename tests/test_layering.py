@@ -1,4 +1,4 @@
-"""The dependency rules of DESIGN §1, checked in fresh interpreters."""
+"""The dependency rules of docs/design.md §1, checked in fresh interpreters."""
 
 from __future__ import annotations
 

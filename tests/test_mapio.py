@@ -1,4 +1,4 @@
-"""Tests for mrslam_env.mapio: ROS map_server files (DESIGN §2)."""
+"""Tests for mrslam_env.mapio: ROS map_server files (docs/design.md §2)."""
 
 from __future__ import annotations
 

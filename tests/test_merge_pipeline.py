@@ -1,4 +1,4 @@
-"""``merge_maps`` end to end (DESIGN §5): the pipeline's invariants and its verdicts.
+"""``merge_maps`` end to end (docs/design.md §5): the pipeline's invariants and its verdicts.
 
 - The issue's invariant: a realistic partial map merged with the same observation expressed
   in a frame turned by any angle (all round the circle) and shifted off the lattice is
@@ -33,7 +33,7 @@ from mrslam_env.merge.pipeline import (
     relative_transform_error,
 )
 from mrslam_env.merge.refine import RandomWalkConfig
-from mrslam_env.worlds import build_world
+from mrslam_env.registry import build_world
 
 ONE_DEGREE = math.radians(1.0)
 MERGE_TOLERANCE_M = 0.1  # realistic partial overlaps: translation error at m2's centre

@@ -1,7 +1,7 @@
 """The Rerun recorder, read back with Rerun's own reader (``rerun.chunk.RrdReader``).
 
 A small recording is written to a temporary file once per module and its chunks are
-checked: entity paths (DESIGN §7), timelines, per-step content, static ground truth, the
+checked: entity paths (docs/design.md §7), timelines, per-step content, static ground truth, the
 blueprint, and that maps and poses line up under Rerun's placement rules.
 """
 

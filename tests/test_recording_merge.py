@@ -1,4 +1,4 @@
-"""``Recorder.log_merge``: the merge stages under ``merge/*`` (DESIGN §7), read back.
+"""``Recorder.log_merge``: the merge stages under ``merge/*`` (docs/design.md §7), read back.
 
 A merge made with ``trace=True`` is logged into a temporary ``.rrd`` file and read back with
 Rerun's own reader (the ``Recording`` helper of ``test_recording``): the entity paths, that

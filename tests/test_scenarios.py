@@ -19,9 +19,9 @@ from scipy import ndimage
 
 from mrslam_env.gridmap import GridMap
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
-from scenarios import worlds
-from scenarios.catalog import SCENARIOS, Scenario
-from scenarios.procedural import ProceduralConfig, build_procedural, generate_floor_plan
+from scenarios.worlds import buildings
+from scenarios.worlds.catalog import SCENARIOS, Scenario
+from scenarios.worlds.procedural import ProceduralConfig, build_procedural, generate_floor_plan
 
 RESOLUTION = 0.05  # m per cell of the test rasters
 MARGIN = 1.0  # m of outside space around each raster
@@ -94,7 +94,7 @@ def test_catalogue_is_read_only() -> None:
 @pytest.mark.parametrize("name", ["", "two words", "office\n"])
 def test_scenario_rejects_bad_names(name: str) -> None:
     with pytest.raises(ValueError, match=r"Scenario\.name"):
-        Scenario(name=name, description="x", build=worlds.build_office)
+        Scenario(name=name, description="x", build=buildings.build_office)
 
 
 @pytest.mark.parametrize("name", HAND_MADE)
@@ -108,7 +108,7 @@ def test_hand_made_worlds_ignore_the_seed(name: str) -> None:
 
 
 def test_door_has_the_requested_clear_width() -> None:
-    pieces = worlds.horizontal_wall(2.0, 0.0, 6.0, doors=[(3.0, 1.2)])
+    pieces = buildings.horizontal_wall(2.0, 0.0, 6.0, doors=[(3.0, 1.2)])
     assert len(pieces) == 2
     left_face = pieces[0][:, 0].max()
     right_face = pieces[1][:, 0].min()
@@ -122,7 +122,7 @@ def test_door_has_the_requested_clear_width() -> None:
 @pytest.mark.parametrize("doors", [[(1.0, 1.0), (1.8, 1.0)], [(0.3, 1.0)], [(5.8, 1.0)]])
 def test_overlapping_or_overhanging_doors_are_rejected(doors: list[tuple[float, float]]) -> None:
     with pytest.raises(ValueError, match="opening"):
-        worlds.horizontal_wall(0.0, 0.0, 6.0, doors=doors)
+        buildings.horizontal_wall(0.0, 0.0, 6.0, doors=doors)
 
 
 # ----------------------------------------------------------------------------- each world
@@ -193,7 +193,7 @@ def test_a_sealed_room_fails_the_passability_check() -> None:
     """The passability check above can fail: a wall across the doorway of the office's
     narrow north room (x 8.5-11.5 m, door at x = 10 m) seals it off."""
     office = world_of("office", 0)
-    door = worlds.horizontal_wall(9.0, 9.0, 11.0)
+    door = buildings.horizontal_wall(9.0, 9.0, 11.0)
     sealed = WorldSpec.from_walls("sealed", [*office.walls, *door], office.starts)
     grid = ground_truth_map(sealed, RESOLUTION, margin=MARGIN)
     centre_space = wall_clearance(grid) >= ROBOT_RADIUS + ROBOT_MARGIN
@@ -265,13 +265,13 @@ def test_twin_wings_are_copies_up_to_small_details() -> None:
     but not everywhere (the asymmetric details make the true alignment unique)."""
     world = world_of("twin_wings", 0)
     grid = ground_truth_map(world, RESOLUTION)
-    width = 2.0 * worlds.TWIN_WING_WIDTH + worlds.TWIN_HALL_LENGTH
+    width = 2.0 * buildings.TWIN_WING_WIDTH + buildings.TWIN_HALL_LENGTH
     xmin, ymin, xmax, ymax = grid.extent
     # The raster is centred on the building, so a half turn maps cells onto cells.
     assert (xmin + xmax) / 2.0 == pytest.approx(width / 2.0, abs=1e-6)
-    assert (ymin + ymax) / 2.0 == pytest.approx(worlds.TWIN_WING_DEPTH / 2.0, abs=1e-6)
+    assert (ymin + ymax) / 2.0 == pytest.approx(buildings.TWIN_WING_DEPTH / 2.0, abs=1e-6)
     turned = grid.cells[::-1, ::-1]
-    west_wing = slice(0, round((worlds.TWIN_WING_WIDTH + 0.05 - xmin) / RESOLUTION))
+    west_wing = slice(0, round((buildings.TWIN_WING_WIDTH + 0.05 - xmin) / RESOLUTION))
     same = grid.cells[:, west_wing] == turned[:, west_wing]
     assert same.mean() >= 0.95
     # Walls, not just empty space, must match: most wall cells of the west wing are walls
@@ -284,7 +284,10 @@ def test_twin_wings_are_copies_up_to_small_details() -> None:
 def test_twin_wings_robots_start_at_symmetric_poses() -> None:
     first, second = world_of("twin_wings", 0).starts
     centre = np.array(
-        [worlds.TWIN_WING_WIDTH + worlds.TWIN_HALL_LENGTH / 2.0, worlds.TWIN_WING_DEPTH / 2.0]
+        [
+            buildings.TWIN_WING_WIDTH + buildings.TWIN_HALL_LENGTH / 2.0,
+            buildings.TWIN_WING_DEPTH / 2.0,
+        ]
     )
     assert np.allclose(first[:2] + second[:2], 2.0 * centre)
     assert abs(math.remainder(first[2] - second[2] - math.pi, 2.0 * math.pi)) < 1e-9

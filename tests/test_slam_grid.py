@@ -15,12 +15,12 @@ from itertools import pairwise
 import numpy as np
 import pytest
 
+from mrslam_env.evaluation import map_agreement
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN
 from mrslam_env.sim.lidar import cast_scan
 from mrslam_env.sim.world import WorldSpec, box, ground_truth_map
 from mrslam_env.slam.config import GridConfig, SlamConfig
-from mrslam_env.slam.evaluation import map_agreement
 from mrslam_env.slam.grid import (
     HIT_AVERAGE_CAP,
     KERNEL_SCALE,

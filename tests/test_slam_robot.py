@@ -13,6 +13,7 @@ import pytest
 from slam_worlds import corridor_world, noisy_scan
 
 from mrslam_env.config import OdometryConfig
+from mrslam_env.evaluation import absolute_trajectory_error, map_agreement
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import GridMap
 from mrslam_env.sim.sensors import (
@@ -22,7 +23,6 @@ from mrslam_env.sim.sensors import (
 )
 from mrslam_env.sim.world import WorldSpec, box, ground_truth_map
 from mrslam_env.slam.config import SlamConfig
-from mrslam_env.slam.evaluation import absolute_trajectory_error, map_agreement
 from mrslam_env.slam.slam import RobotSlam
 
 
@@ -226,7 +226,7 @@ def test_slam_in_a_featureless_corridor_follows_odometry_along_it() -> None:
 
 
 def test_short_scenario_run_slam_is_much_better_than_odometry() -> None:
-    from scenarios.bench_slam import format_slam_table, run_slam_benchmark
+    from scenarios.bench.slam import format_slam_table, run_slam_benchmark
 
     (row,) = run_slam_benchmark(["office"], steps=600, seed=0)
     assert row["ate_odometry"] > 0.1
@@ -272,7 +272,7 @@ def test_map_agreement_definition() -> None:
 
 def test_slam_package_stays_light() -> None:
     code = (
-        "import sys; import mrslam_env.slam.slam, mrslam_env.slam.evaluation; "
+        "import sys; import mrslam_env.slam.slam, mrslam_env.evaluation; "
         "print(' '.join(sorted({m.split('.')[0] for m in sys.modules})))"
     )
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

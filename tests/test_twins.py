@@ -9,18 +9,14 @@ import pytest
 from test_aliasing import RES, ROOM, _apply, left_room_seen_from, twin_rooms
 from test_aliasing import _row as aliasing_row
 
+from mrslam_env.evaluation import true_overlap
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
-from mrslam_env.worlds import build_world
-from scenarios import twins as twins_module
-from scenarios.bench_merge import (
-    MergePair,
-    format_merge_table,
-    format_twin_breakdown,
-    summarize,
-    true_overlap,
-)
-from scenarios.twins import (
+from mrslam_env.registry import build_world
+from scenarios.bench.merge import twins as twins_module
+from scenarios.bench.merge.pairs import MergePair
+from scenarios.bench.merge.report import format_merge_table, format_twin_breakdown, summarize
+from scenarios.bench.merge.twins import (
     WorldTwin,
     load_or_compute_world_twins,
     world_grid,

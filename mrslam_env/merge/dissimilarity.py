@@ -1,4 +1,4 @@
-"""How well two occupancy grids agree under a relative pose (DESIGN §5 step 6).
+"""How well two occupancy grids agree under a relative pose (docs/design.md §5 step 6).
 
 Birk & Carpin, "Merging occupancy grid maps from multiple robots" (Proc. IEEE 94(7), 2006),
 score a candidate ``map1_from_map2`` with the *dissimilarity*
@@ -608,7 +608,7 @@ def dissimilarity(
     config: DissimilarityConfig | None = None,
 ) -> float:
     """Birk & Carpin's dissimilarity psi of m1 and m2 placed by ``map1_from_map2``
-    (paper eqs. 11–12, DESIGN §5 step 6).
+    (paper eqs. 11–12, docs/design.md §5 step 6).
 
     Parameters
     ----------
@@ -769,7 +769,7 @@ def largest_conflict(
 
     Scattered conflict cells come from drift and sensor noise and appear under the true
     transform too; a long unbroken line of them is a wall the other map saw straight
-    through, evidence that the placement is wrong (DESIGN §5 step 6, the judge).
+    through, evidence that the placement is wrong (docs/design.md §5 step 6, the judge).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Bringing maps to one lattice and fusing them (DESIGN §5 step 7).
+"""Bringing maps to one lattice and fusing them (docs/design.md §5 step 7).
 
 - :func:`resample_map` changes a grid's resolution (down-sampling keeps the most
   conservative class of each block: occupied over free over unknown).
@@ -276,7 +276,7 @@ def warp_map(m2: GridMap, map1_from_map2: ArrayLike, *, like: GridMap | None = N
 
 
 def fuse_maps(m1: GridMap, m2: GridMap, map1_from_map2: ArrayLike) -> GridMap:
-    """Fuse m2 into m1's frame (DESIGN §5 step 7).
+    """Fuse m2 into m1's frame (docs/design.md §5 step 7).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Relative-pose hypotheses from virtual runs localised in map 2 (DESIGN §5 step 4).
+"""Relative-pose hypotheses from virtual runs localised in map 2 (docs/design.md §5 step 4).
 
 While the virtual robot is at ``xi1`` in m1 (it knows this pose exactly) and a particle
 cluster puts it at ``xi2`` in m2, the maps are related by ``T1 = T21 · T2`` (paper eq. 8),
@@ -182,7 +182,7 @@ def relative_pose(pose_in_map1: ArrayLike, pose_in_map2: ArrayLike) -> FloatArra
 def cluster_hypotheses(
     mcl_result: MclResult, pose_in_map1: ArrayLike, run_id: int = 0
 ) -> list[Hypothesis]:
-    """One hypothesis per particle cluster of ``mcl_result`` (DESIGN §5 step 4).
+    """One hypothesis per particle cluster of ``mcl_result`` (docs/design.md §5 step 4).
 
     Parameters
     ----------
@@ -421,7 +421,7 @@ def generate_hypotheses(
     rng: np.random.Generator,
     trace: bool = False,
 ) -> HypothesisSet:
-    """Ranked ``map1_from_map2`` hypotheses by virtual robot motion (DESIGN §5 steps 1–4).
+    """Ranked ``map1_from_map2`` hypotheses by virtual robot motion (docs/design.md §5 steps 1–4).
 
     Skeletons of both maps; many short virtual runs along m1's skeleton; partial-map MCL
     of each run in m2; one hypothesis per particle cluster (``T1 · T2⁻¹``); pooled and

@@ -1,4 +1,4 @@
-"""Partial-map Monte Carlo localisation of a virtual run in map 2 (DESIGN §5 step 3).
+"""Partial-map Monte Carlo localisation of a virtual run in map 2 (docs/design.md §5 step 3).
 
 The virtual robot's scans of m1 (:mod:`mrslam_env.merge.virtual`) drive a particle filter
 in m2 (Thrun et al., *Probabilistic Robotics*, §8.3), with the paper's sample-space
@@ -585,7 +585,7 @@ def localize_in_map(
     skeleton: SkeletonGraph | None = None,
     trace: bool = False,
 ) -> MclResult:
-    """Partial-map MCL of a virtual run's scans in m2 (DESIGN §5 step 3, paper §3–4.1).
+    """Partial-map MCL of a virtual run's scans in m2 (docs/design.md §5 step 3, paper §3–4.1).
 
     Parameters
     ----------

@@ -1,6 +1,6 @@
 """``merge_maps``: the whole virtual-robot-motion merge, from two grids to a verdict.
 
-DESIGN §5, offline (no rendezvous): the maps are brought to one working resolution; the
+docs/design.md §5, offline (no rendezvous): the maps are brought to one working resolution; the
 hypothesis side (:func:`~mrslam_env.merge.hypotheses.generate_hypotheses`: skeletons,
 virtual runs along m1's skeleton, partial-map MCL in m2, clusters pooled and voted across
 runs) proposes ranked ``map1_from_map2`` hypotheses, and a wall correlation over the
@@ -394,7 +394,7 @@ class MergeResult:
         return self.transform is not None
 
     def as_dict(self) -> dict[str, object]:
-        """The ``mrslam merge --json`` report (DESIGN §8)."""
+        """The ``mrslam merge --json`` report (docs/design.md §8)."""
         transform = None
         if self.transform is not None:
             x, y, theta = (float(v) for v in self.transform)
@@ -670,7 +670,7 @@ def merge_maps(
     rng: np.random.Generator | int | None = None,
     trace: bool = False,
 ) -> MergeResult:
-    """Merge two partial occupancy maps by virtual robot motion (DESIGN §5).
+    """Merge two partial occupancy maps by virtual robot motion (docs/design.md §5).
 
     Parameters
     ----------
@@ -864,7 +864,7 @@ def refine_transform(
     *,
     rng: np.random.Generator,
 ) -> tuple[FloatArray, float, Agreement]:
-    """Refine a known-good ``map1_from_map2`` on the current maps (DESIGN §5 step 6):
+    """Refine a known-good ``map1_from_map2`` on the current maps (docs/design.md §5 step 6):
     the random walk at the working resolution, then at the finer input resolution.
 
     For a transform verified some other way (a rendezvous); no acceptance decision is

@@ -1,4 +1,4 @@
-"""Refinement of a relative pose by Birk & Carpin's adaptive random walk (DESIGN §5 step 6).
+"""Refinement of a relative pose by Birk & Carpin's adaptive random walk (docs/design.md §5 step 6).
 
 Birk & Carpin, "Merging occupancy grid maps from multiple robots" (Proc. IEEE 94(7), 2006),
 and Algorithm 3 of the virtual-robot paper: starting from a hypothesis ``t_0``, propose

@@ -1,4 +1,4 @@
-"""Skeleton of a map's free space and its graph (DESIGN §5 step 1; paper §3.1).
+"""Skeleton of a map's free space and its graph (docs/design.md §5 step 1; paper §3.1).
 
 The free space of a partial map is cleaned (unknown is not free; specks and small holes
 that noisy SLAM maps leave behind would otherwise become skeleton spurs and loops), then
@@ -307,7 +307,7 @@ def skeletonize_free_space(
     smoothing_radius: float = 0.1,
     min_component_area: float = 0.25,
 ) -> BoolArray:
-    """Zhang–Suen skeleton of a map's cleaned free space (paper §3.1, DESIGN §5 step 1).
+    """Zhang–Suen skeleton of a map's cleaned free space (paper §3.1, docs/design.md §5 step 1).
 
     Parameters
     ----------

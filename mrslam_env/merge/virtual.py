@@ -1,4 +1,4 @@
-"""The virtual robot: simulated lidar runs along the skeleton of map 1 (DESIGN §5 step 2).
+"""The virtual robot: simulated lidar runs along the skeleton of map 1 (docs/design.md §5 step 2).
 
 A simulated robot drives along the skeleton of m1, heading along its path, and takes a
 scan of m1 every ``step`` metres by exact ray casting in the grid; the odometry between
@@ -406,7 +406,7 @@ def virtual_robot_runs(
     rng: np.random.Generator,
     graph: SkeletonGraph | None = None,
 ) -> list[VirtualRun]:
-    """Many short virtual-robot runs along the skeleton of ``m1`` (DESIGN §5 step 2).
+    """Many short virtual-robot runs along the skeleton of ``m1`` (docs/design.md §5 step 2).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Simulator worlds built from occupancy grids (ROS map files, DESIGN §3).
+"""Simulator worlds built from occupancy grids (ROS map files, docs/design.md §3).
 
 :func:`world_from_map` turns a :class:`~mrslam_env.gridmap.GridMap` into a
 :class:`~mrslam_env.sim.world.WorldSpec`:

@@ -1,4 +1,4 @@
-"""A growing log-odds occupancy grid with exact beam integration (DESIGN §2, §4).
+"""A growing log-odds occupancy grid with exact beam integration (docs/design.md §2, §4).
 
 :class:`OccupancyGrid` lives in a robot's map frame. It starts as one chunk around the
 map origin and grows by whole chunks in whichever direction a scan needs; its origin stays
@@ -333,7 +333,7 @@ def integrate_scan(
         From :func:`gaussian_kernels`.
     scan_id : int
     origin_x, origin_y, resolution : float
-        Grid placement (DESIGN §2), m.
+        Grid placement (docs/design.md §2), m.
     x, y, heading : float
         Sensor pose in the grid's frame, m, m, rad.
     ranges : ndarray, shape (N,), float64
@@ -502,7 +502,7 @@ class OccupancyGrid:
     """A log-odds occupancy grid that grows as the robot explores.
 
     Coordinates are in the grid's own frame (for onboard SLAM: the robot's map frame).
-    Cell conventions are those of DESIGN §2 (``[iy, ix]``, row 0 at the lowest y,
+    Cell conventions are those of docs/design.md §2 (``[iy, ix]``, row 0 at the lowest y,
     ``origin`` the corner of cell [0, 0]).
 
     Parameters

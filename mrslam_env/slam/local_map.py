@@ -3,7 +3,7 @@
 This is what a learned policy sees of the map (the env's ``local_map`` observation). The
 crop is centred on the robot and turned with it: the robot looks along +x (increasing
 column), +y (increasing row) is to its left, row 0 is the lowest local y, as everywhere
-in the project (DESIGN §2).
+in the project (docs/design.md §2).
 
 Channels (uint8, 0 or 1):
 
@@ -55,7 +55,7 @@ def egocentric_crop(
     Parameters
     ----------
     log_odds : ndarray, shape (rows, cols), float32
-        The map (DESIGN §2 placement given by ``origin_x, origin_y, resolution``, m).
+        The map (docs/design.md §2 placement given by ``origin_x, origin_y, resolution``, m).
     x, y, heading : float
         The robot's pose in the map frame, m, m, rad.
     cells : int

@@ -1,4 +1,4 @@
-"""Scan-to-map matching: correlative search, then Gauss–Newton refinement (DESIGN §4).
+"""Scan-to-map matching: correlative search, then Gauss–Newton refinement (docs/design.md §4).
 
 The map side is the set of likelihood fields an :class:`~mrslam_env.slam.grid.OccupancyGrid`
 keeps current (sums of Gaussians on its OCCUPIED cells' mean hit points, scaled so that a

@@ -1,7 +1,7 @@
 """Exact beam traversal on a grid (Amanatides & Woo, 1987), as numba kernels.
 
 Every cell a beam passes through is visited exactly once, in order from the sensor to the
-endpoint. Grid conventions are those of DESIGN §2: ``[iy, ix]`` indexing, ``origin`` the
+endpoint. Grid conventions are those of docs/design.md §2: ``[iy, ix]`` indexing, ``origin`` the
 world corner of cell [0, 0], ``resolution`` metres per cell.
 """
 

@@ -1,4 +1,4 @@
-"""One robot's onboard SLAM: a growing occupancy grid and scan-to-map matching (DESIGN §4).
+"""One robot's onboard SLAM: a growing occupancy grid and scan-to-map matching (docs/design.md §4).
 
 :class:`RobotSlam` takes, every step, the robot's dead-reckoning pose (its odom frame) and
 its lidar scan, and returns its pose in its *map* frame. The map frame is the robot's start

@@ -1,6 +1,6 @@
 """The exploration benchmark behind ``mrslam bench explore``.
 
-Per scenario and seed, the end-to-end experiment (:func:`scenarios.runner.run_experiment`)
+Per scenario and seed, the end-to-end experiment (:func:`scenarios.experiment.run_experiment`)
 runs twice from the same starts: with the team coordinator (merge by virtual robot motion,
 rendezvous verification, coordinated exploration of the merged map) and with the same
 robots exploring independently (no interaction). Reported per scenario:
@@ -35,7 +35,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
-from scenarios.runner import RunConfig, run_experiment
+from scenarios.experiment import RunConfig, run_experiment
 
 __all__ = ["DEFAULT_SCENARIOS", "format_explore_table", "run_explore_benchmark"]
 

@@ -12,7 +12,7 @@ robots, per-robot values alongside):
                     frame is put in the world by the robot's true start pose)
 ``ate_odometry``    the same for dead reckoning
 ``ratio``           ``ate_slam / ate_odometry``
-``map_agreement``   :func:`~mrslam_env.slam.evaluation.map_agreement` of the SLAM map
+``map_agreement``   :func:`~mrslam_env.evaluation.map_agreement` of the SLAM map
                     with the ground-truth raster at the map's resolution
 ``update_ms``       median time of one SLAM update (one robot, one step), ms; also
                     ``update_mean_ms``
@@ -39,12 +39,12 @@ import numpy as np
 from agents.wander import WanderPolicy
 from mrslam_env.config import EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
+from mrslam_env.evaluation import absolute_trajectory_error, map_agreement
+from mrslam_env.registry import build_world
 from mrslam_env.sim.lidar import cast_scan
 from mrslam_env.sim.world import box, ground_truth_map, polygon_edges
 from mrslam_env.slam.config import SlamConfig
-from mrslam_env.slam.evaluation import absolute_trajectory_error, map_agreement
 from mrslam_env.slam.slam import RobotSlam
-from mrslam_env.worlds import build_world
 
 __all__ = ["DEFAULT_SCENARIOS", "format_slam_table", "run_slam_benchmark", "warm_up"]
 
@@ -75,7 +75,7 @@ def run_slam_benchmark(
     Parameters
     ----------
     scenarios : sequence of str
-        Scenario names (:func:`mrslam_env.worlds.build_world`).
+        Scenario names (:func:`mrslam_env.registry.build_world`).
     steps : int
         Env steps per run.
     seed : int

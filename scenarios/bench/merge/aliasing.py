@@ -54,10 +54,10 @@ from scipy import fft as scipy_fft
 from scipy import ndimage
 
 from mrslam_env.geometry import transform_points
-from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
+from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap, grid_footprint, resample_cells
 from mrslam_env.merge.fuse import resample_map
 from mrslam_env.validation import check_fields, require
-from scenarios.bench_merge import MergePair, grid_footprint, resample_cells
+from scenarios.bench.merge.pairs import MergePair
 
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance

@@ -1,22 +1,32 @@
-"""How good a robot's SLAM is: trajectory error and map agreement against ground truth.
+"""Scores against ground truth: SLAM trajectory error and map agreement, the error of a
+merge transform, and the true overlap and agreement of two maps.
 
-Both compare a result in the robot's *map* frame with the ground truth in the *world*
+The SLAM scores compare a result in the robot's *map* frame with the ground truth in the *world*
 frame, through ``world_from_map``: for onboard SLAM that is the robot's true start pose
-(the map frame is the start pose, DESIGN §2), known to the evaluation only.
+(the map frame is the start pose, docs/design.md §2), known to the evaluation only.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
-from mrslam_env.geometry import compose
-from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
+from mrslam_env.geometry import compose, wrap_scalar
+from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap, grid_footprint, resample_cells
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["absolute_trajectory_error", "map_agreement"]
+__all__ = [
+    "absolute_trajectory_error",
+    "cell_agreement",
+    "map_agreement",
+    "overlap_of_masks",
+    "pose_errors",
+    "true_overlap",
+]
 
 
 def absolute_trajectory_error(
@@ -98,3 +108,51 @@ def map_agreement(estimate: GridMap, world_from_map: ArrayLike, ground_truth: Gr
     agree = np.where(values == FREE, truth_free, truth_near_occupied)
     agree &= (values == FREE) | (values == OCCUPIED)
     return float(np.mean(agree))
+
+
+def pose_errors(estimate: FloatArray, truth: FloatArray) -> tuple[float, float]:
+    """Translation error (m) and absolute rotation error (degrees, wrapped) of a transform."""
+    e = np.asarray(estimate, dtype=np.float64)
+    t = np.asarray(truth, dtype=np.float64)
+    translation = math.hypot(e[0] - t[0], e[1] - t[1])
+    rotation = abs(wrap_scalar(float(e[2] - t[2])))
+    return translation, math.degrees(rotation)
+
+
+def true_overlap(m1: GridMap, m2: GridMap, map1_from_map2: FloatArray) -> float:
+    """Overlap of two maps under the true transform: the area known (FREE or OCCUPIED) in
+    both, over the smaller of the two known areas, in [0, 1].
+
+    Both maps are resampled onto one raster in map 1's frame at the finer resolution.
+    Returns 0 when either map knows nothing.
+    """
+    transform = np.asarray(map1_from_map2, dtype=np.float64)
+    resolution = min(m1.resolution, m2.resolution)
+    corners = np.vstack([grid_footprint(m1, np.zeros(3)), grid_footprint(m2, transform)])
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    shape = (
+        math.ceil((hi[1] - lo[1]) / resolution),
+        math.ceil((hi[0] - lo[0]) / resolution),
+    )
+    origin = (float(lo[0]), float(lo[1]))
+    known1 = resample_cells(m1, np.zeros(3), origin, shape, resolution) != UNKNOWN
+    known2 = resample_cells(m2, transform, origin, shape, resolution) != UNKNOWN
+    return overlap_of_masks(known1, known2)
+
+
+def overlap_of_masks(known1: NDArray[np.bool_], known2: NDArray[np.bool_]) -> float:
+    smaller = min(int(known1.sum()), int(known2.sum()))
+    return 0.0 if smaller == 0 else int(np.count_nonzero(known1 & known2)) / smaller
+
+
+def cell_agreement(m1: GridMap, m2: GridMap, map1_from_map2: FloatArray) -> float:
+    """Share of the cells known in both maps (m2 resampled onto m1's lattice) that have the
+    same state, in [0, 1]; NaN when no cell is known in both.
+
+    A diagnostic for wrong answers: a wrong transform that agrees as well as the truth
+    means the two maps alone cannot tell them apart (symmetric or repetitive places).
+    """
+    transform = np.asarray(map1_from_map2, dtype=np.float64)
+    warped = resample_cells(m2, transform, m1.origin, m1.shape, m1.resolution)
+    both = (warped != UNKNOWN) & (m1.cells != UNKNOWN)
+    return float(np.mean(warped[both] == m1.cells[both])) if both.any() else math.nan

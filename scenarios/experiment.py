@@ -1,4 +1,4 @@
-"""The experiment runner behind ``mrslam run`` (DESIGN §6, §8).
+"""The experiment runner behind ``mrslam run`` (docs/design.md §6, §8).
 
 Two robots start at poses neither knows of the other. Each maps with its onboard SLAM and
 explores its own frontiers; when they can talk, the team coordinator
@@ -31,15 +31,15 @@ from numpy.typing import NDArray
 from agents.team import TeamConfig, TeamCoordinator, TeamState
 from mrslam_env.config import CommConfig, EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv, observable_cells
+from mrslam_env.evaluation import map_agreement
 from mrslam_env.geometry import compose, inverse, transform_points, wrap_scalar
 from mrslam_env.gridmap import UNKNOWN, GridMap
 from mrslam_env.mapio import load_map, save_map
 from mrslam_env.merge.fuse import fuse_maps, resample_map
 from mrslam_env.recording import Recorder
+from mrslam_env.registry import build_world
 from mrslam_env.sim.mapworld import world_from_map
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
-from mrslam_env.slam.evaluation import map_agreement
-from mrslam_env.worlds import build_world
 from scenarios.figure import summary_figure
 
 __all__ = ["CoverageEvaluator", "RunConfig", "resolve_world", "run_experiment"]
@@ -355,7 +355,7 @@ def _record_step(
     config: RunConfig,
     logged_scans: list[int],
 ) -> None:
-    """What one step adds to the recording (DESIGN §7)."""
+    """What one step adds to the recording (docs/design.md §7)."""
     agents = list(env.possible_agents)
     lidar = env.config.lidar
     due = recorder.map_due or not env.agents

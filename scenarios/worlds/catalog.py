@@ -22,8 +22,8 @@ from dataclasses import dataclass
 from types import MappingProxyType
 
 from mrslam_env.sim.world import WorldSpec
-from scenarios import worlds
-from scenarios.procedural import build_procedural
+from scenarios.worlds import buildings
+from scenarios.worlds.procedural import build_procedural
 
 __all__ = ["DEFAULT_SCENARIO", "SCENARIOS", "Scenario"]
 
@@ -66,23 +66,23 @@ SCENARIOS: Mapping[str, Scenario] = MappingProxyType(
         for scenario in (
             Scenario(
                 name="office",
-                description=worlds.OFFICE_DESCRIPTION,
-                build=worlds.build_office,
+                description=buildings.OFFICE_DESCRIPTION,
+                build=buildings.build_office,
             ),
             Scenario(
                 name="warehouse",
-                description=worlds.WAREHOUSE_DESCRIPTION,
-                build=worlds.build_warehouse,
+                description=buildings.WAREHOUSE_DESCRIPTION,
+                build=buildings.build_warehouse,
             ),
             Scenario(
                 name="maze",
-                description=worlds.MAZE_DESCRIPTION,
-                build=worlds.build_maze,
+                description=buildings.MAZE_DESCRIPTION,
+                build=buildings.build_maze,
             ),
             Scenario(
                 name="twin_wings",
-                description=worlds.TWIN_WINGS_DESCRIPTION,
-                build=worlds.build_twin_wings,
+                description=buildings.TWIN_WINGS_DESCRIPTION,
+                build=buildings.build_twin_wings,
             ),
             Scenario(
                 name="procedural",

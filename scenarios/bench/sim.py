@@ -96,7 +96,7 @@ def bench_sim(
         with_slam = env_steps_per_second(world, n_steps=n_steps, repeats=repeats)
         theirs = None
         if irsim:
-            from scenarios.bench_irsim import irsim_steps_per_second
+            from scenarios.bench.irsim import irsim_steps_per_second
 
             theirs = irsim_steps_per_second(world, n_steps=max(n_steps // 5, 50), repeats=repeats)
         rows.append(SimBenchRow(name, ours, theirs, with_slam))

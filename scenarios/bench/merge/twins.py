@@ -7,7 +7,7 @@ the next identical room), a robot started there would have built the same map 2.
 gives one answer for both: it can be right on one at most. Such a pair is *undecidable*.
 
 :func:`world_twin` finds the second start by the exhaustive placement search of
-:func:`scenarios.aliasing.aliasing`, run with the world itself as map 1: the world is
+:func:`scenarios.bench.merge.aliasing.aliasing`, run with the world itself as map 1: the world is
 rasterised (:func:`world_grid`: floor the robots can reach is free, walls and everything
 out of reach are occupied) and every placement of map 2 over it is scored at 1° and 0.1 m
 steps. The true placement is the robot's real start. Map 2 has a *twin* start when the
@@ -43,18 +43,19 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
+from mrslam_env.evaluation import true_overlap
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
+from mrslam_env.registry import build_world
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
-from mrslam_env.worlds import build_world
-from scenarios.aliasing import (
+from scenarios.bench.merge.aliasing import (
     AliasingConfig,
     aliasing,
     cached_per_pair,
     config_key,
     placement_counts,
 )
-from scenarios.bench_merge import MergePair, true_overlap
+from scenarios.bench.merge.pairs import MergePair
 
 FloatArray = NDArray[np.float64]
 
@@ -88,7 +89,7 @@ class WorldTwin:
         ``map1_from_map2`` that the twin start implies; None when map 2 fits the world
         nowhere else as well.
     twin_overlap : float
-        Overlap of the maps under ``twin`` (:func:`~scenarios.bench_merge.true_overlap`),
+        Overlap of the maps under ``twin`` (:func:`~scenarios.bench.merge.true_overlap`),
         0.0 without a twin.
     truth_conflicts : float
         Conflicts (search cells) of map 2 with the world at its true start: the map's own
@@ -169,7 +170,7 @@ def world_twin(
     start, and what that makes of the pair (module docstring).
 
     ``pair.info`` must hold the world start poses ``start1_world`` and ``start2_world``
-    (the pairs of :func:`~scenarios.bench_merge.generate_pairs` do).
+    (the pairs of :func:`~scenarios.bench.merge.generate_pairs` do).
     """
     start1, start2 = world_starts(pair)
     config = config or AliasingConfig()
@@ -209,7 +210,7 @@ def load_or_compute_world_twins(
     progress: Callable[[str], None] | None = None,
 ) -> dict[str, WorldTwin]:
     """:func:`world_twin` of every pair that has world start poses (the pairs of
-    :func:`~scenarios.bench_merge.generate_pairs` do), by pair id, each in the world its
+    :func:`~scenarios.bench.merge.generate_pairs` do), by pair id, each in the world its
     scenario names (``worlds``); read from and written to
     ``folder / "twins-<config digest>.json"`` when ``folder`` is given."""
     config = config or AliasingConfig()

@@ -1,6 +1,6 @@
 """Scenario lookup by name through the ``mrslam.scenarios`` entry-point group.
 
-The library never imports the ``scenarios`` package (DESIGN §1): worlds are plugins. Any
+The library never imports the ``scenarios`` package (docs/design.md §1): worlds are plugins. Any
 installed distribution can add worlds by declaring, in its ``pyproject.toml``::
 
     [project.entry-points."mrslam.scenarios"]
