@@ -155,16 +155,18 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
                 f"render_mode must be None or one of {self.metadata['render_modes']}, "
                 f"got {render_mode!r}"
             )
+        if not isinstance(scenario, str | WorldSpec):
+            raise ValueError(f"scenario must be a scenario name or a WorldSpec, got {scenario!r}")
         self.world = scenario if isinstance(scenario, WorldSpec) else build_world(scenario)
         self.config = config if config is not None else EnvConfig()
         self.render_mode = render_mode
         self.possible_agents = [f"robot_{i}" for i in range(n_robots)]
         self.agents = list(self.possible_agents)
-        self._initial_seed = seed
+        self._initial_seed = checked_seed(seed)
         self._coverage_template = ground_truth_map(
             self.world, self.config.reward.coverage_resolution, margin=1.0
         )
-        self.np_random, self.np_random_seed = seeding.np_random(seed)
+        self.np_random, self.np_random_seed = seeding.np_random(self._initial_seed)
         self._sim: Simulator | None = None
         self._slams: list[RobotSlam] = []
         self._render_base: NDArray[np.uint8] | None = None
@@ -204,6 +206,7 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[AgentID, ObsDict], dict[AgentID, dict[str, Any]]]:
+        seed = checked_seed(seed)
         if seed is None and self._sim is None:
             seed = self._initial_seed
         if seed is not None:
@@ -271,7 +274,12 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         for i, agent in enumerate(self.possible_agents):
             if agent not in actions:
                 raise ValueError(f"missing action for {agent}")
-            action = np.asarray(actions[agent], dtype=np.float64)
+            raw = np.asarray(actions[agent])
+            if raw.dtype.kind not in "iuf":  # not bool, complex, str or object
+                raise ValueError(
+                    f"action for {agent} must be real numbers, got {raw.dtype} {actions[agent]!r}"
+                )
+            action = raw.astype(np.float64)
             if action.shape != (2,):
                 raise ValueError(f"action for {agent} must have shape (2,), got {action.shape}")
             if not np.all(np.isfinite(action)):
@@ -445,6 +453,21 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
 
     def close(self) -> None:
         self._render_base = None
+
+
+def checked_seed(seed: Any) -> int | None:
+    """``seed`` as a plain int (numpy integers accepted), or None.
+
+    Raises
+    ------
+    ValueError
+        For a negative number or anything that is not an integer (bools included).
+    """
+    if seed is None:
+        return None
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
+    return int(seed)
 
 
 def observable_cells(grid: GridMap, starts: NDArray[np.float64]) -> NDArray[np.bool_]:

@@ -57,15 +57,20 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
+from mrslam_env.atomic import write_bytes_atomic, write_text_atomic
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 
 __all__ = [
     "FREE_PIXEL",
+    "MAX_GRID_CELLS",
     "OCCUPIED_PIXEL",
     "UNKNOWN_PIXEL",
     "MapFileError",
+    "check_grid_size",
     "grey_to_cells",
     "load_map",
+    "map_images",
+    "map_yaml_path",
     "read_image",
     "save_map",
 ]
@@ -112,6 +117,44 @@ class MapFileError(ValueError):
 _PNM_TOKEN = re.compile(rb"\s*(?:#[^\n\r]*[\n\r]\s*)*(\S+)")
 
 
+MAX_GRID_CELLS = 100_000_000
+"""The largest map grid read or made, in cells (100 M cells: 10,000 x 10,000, about 0.1 GB
+as int8 and several times that while a map is processed). Larger ones are refused with
+their size before anything is allocated."""
+
+
+def check_grid_size(shape: tuple[float, float], what: str) -> None:
+    """Refuse a grid of ``shape`` (rows, cols) over :data:`MAX_GRID_CELLS`, naming ``what``.
+
+    Raises
+    ------
+    ValueError
+        With the size asked for and the limit.
+    """
+    rows, cols = shape
+    if rows * cols > MAX_GRID_CELLS:
+        raise ValueError(
+            f"{what} would be a grid of {rows:,.0f} x {cols:,.0f} = {rows * cols:,.0f} cells; "
+            f"the limit is {MAX_GRID_CELLS:,} (about {MAX_GRID_CELLS / 1e9:.1f} GB as int8)"
+        )
+
+
+def _check_image_size(path: Path, width: int, height: int) -> None:
+    try:
+        check_grid_size((height, width), f"image of {width} x {height} pixels")
+    except ValueError as error:
+        raise MapFileError(path, str(error)) from None
+
+
+def map_images(*yaml_paths: PathLike) -> list[Path]:
+    """The image files that readable map YAML files name (for checks on outputs)."""
+    images = []
+    for yaml_path in map(Path, yaml_paths):
+        image = Path(str(_read_yaml(yaml_path).get("image", "")))
+        images.append(image if image.is_absolute() else yaml_path.parent / image)
+    return images
+
+
 def _read_pnm_grey(path: Path, data: bytes) -> NDArray[np.uint8]:
     """Parse a PGM ``P5`` (binary) or ``P2`` (ascii) image into uint8 (height, width).
 
@@ -135,26 +178,32 @@ def _read_pnm_grey(path: Path, data: bytes) -> NDArray[np.uint8]:
     width, height, maxval = header
     if width <= 0 or height <= 0:
         raise MapFileError(path, f"empty image ({width} x {height} pixels)")
+    _check_image_size(path, width, height)
     if maxval > 255:
         raise MapFileError(path, f"16-bit images are not supported (PGM maxval {maxval})")
     if maxval <= 0:
         raise MapFileError(path, f"corrupt PGM header: maxval is {maxval}")
     count = width * height
     if magic == b"P5":
-        # Exactly one whitespace character separates the header from the raster.
-        raster = data[position + 1 : position + 1 + count]
-        if len(raster) < count:
+        # Exactly one whitespace character separates the header from the raster, and the
+        # raster is exactly width x height bytes: anything else would load shifted or
+        # sheared without a word.
+        raster = data[position + 1 :]
+        if len(raster) != count:
+            crlf = data[position : position + 2] == b"\r\n" and len(raster) == count + 1
             raise MapFileError(
                 path,
-                f"corrupt image: PGM data truncated ({len(raster)} of {count} bytes)",
+                f"PGM data is {len(raster)} bytes but the header says {width} x {height} = "
+                f"{count}" + (" (header lines end in CRLF)" if crlf else ""),
             )
         samples = np.frombuffer(raster, dtype=np.uint8).astype(np.int64)
     else:
         tokens = data[position:].split()
-        if len(tokens) < count:
+        if len(tokens) != count:
             raise MapFileError(
                 path,
-                f"corrupt image: PGM data truncated ({len(tokens)} of {count} values)",
+                f"PGM data has {len(tokens)} values but the header says {width} x {height} = "
+                f"{count}",
             )
         try:
             samples = np.array([int(t) for t in tokens[:count]], dtype=np.int64)
@@ -177,6 +226,7 @@ def _read_pillow_grey(path: Path) -> NDArray[np.uint8]:
 
     try:
         with Image.open(path) as opened:
+            _check_image_size(path, *opened.size)
             opened.load()
             mode = opened.mode
             if mode in ("I", "F") or mode.startswith("I;"):
@@ -415,7 +465,9 @@ def save_map(path_yaml: PathLike, grid: GridMap, image_name: str | None = None) 
     Parameters
     ----------
     path_yaml : path-like
-        The YAML file to write; its folder must exist.
+        The YAML file to write; its folder must exist. ``NAME.pgm`` or a bare ``NAME``
+        stands for ``NAME.yaml`` (:func:`map_yaml_path`). Both files are written
+        atomically (a temporary name, then a rename), the image first.
     grid : GridMap
         The map; row 0 (lowest y) becomes the image's bottom row.
     image_name : str, optional
@@ -425,9 +477,9 @@ def save_map(path_yaml: PathLike, grid: GridMap, image_name: str | None = None) 
     Returns
     -------
     pathlib.Path
-        ``path_yaml``.
+        The YAML file written.
     """
-    yaml_path = Path(path_yaml)
+    yaml_path = map_yaml_path(path_yaml)
     if image_name is None:
         image_name = yaml_path.with_suffix(".pgm").name
     if Path(image_name).is_absolute():
@@ -440,7 +492,8 @@ def save_map(path_yaml: PathLike, grid: GridMap, image_name: str | None = None) 
     pixels[grid.cells == OCCUPIED] = OCCUPIED_PIXEL
     rows, cols = grid.shape
     header = f"P5\n# CREATOR: mrslam {grid.resolution:.3f} m/pix\n{cols} {rows}\n255\n"
-    image_path.write_bytes(header.encode("ascii") + np.ascontiguousarray(pixels[::-1]).tobytes())
+    raster = np.ascontiguousarray(pixels[::-1]).tobytes()
+    write_bytes_atomic(image_path, header.encode("ascii") + raster)
 
     document = {
         "image": Path(image_name).as_posix(),
@@ -451,7 +504,16 @@ def save_map(path_yaml: PathLike, grid: GridMap, image_name: str | None = None) 
         "occupied_thresh": SAVED_OCCUPIED_THRESH,
         "free_thresh": SAVED_FREE_THRESH,
     }
-    yaml_path.write_text(
-        yaml.safe_dump(document, sort_keys=False, default_flow_style=None), encoding="utf-8"
-    )
+    write_text_atomic(yaml_path, yaml.safe_dump(document, sort_keys=False, default_flow_style=None))
     return yaml_path
+
+
+def map_yaml_path(path: PathLike) -> Path:
+    """The YAML file a map output name stands for: ``NAME.yaml`` as given, ``NAME.pgm`` or
+    a bare ``NAME`` as ``NAME.yaml`` (its image is then ``NAME.pgm``)."""
+    path = Path(path)
+    if path.suffix.lower() in (".yaml", ".yml"):
+        return path
+    if path.suffix.lower() == ".pgm":
+        return path.with_suffix(".yaml")
+    return path.with_name(path.name + ".yaml")

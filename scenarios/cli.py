@@ -9,9 +9,11 @@
 ``mrslam bench merge``         map merging: our pipeline against the random walk alone and
                                the ROS map_merge feature baseline, on simulated map pairs
 
-Errors in what the user gave (unknown scenario, unreadable map, bad values) print one line
-``mrslam: error: ...`` and exit with status 2. ``mrslam merge`` exits with 3 when there is
-no confident merge (the transform is null and the reason is printed).
+Exit codes: 0 done; 2 bad input (unknown scenario, unreadable map, bad values, an output
+that would overwrite an input), printed as one line ``mrslam: error: ...``; 3 ``mrslam
+merge`` found no confident merge (the transform is null and the reason is printed); 1 an
+unexpected failure (one line; ``--debug`` shows the traceback); 130 / 143 interrupted by
+Ctrl-C / SIGTERM.
 """
 
 from __future__ import annotations
@@ -19,25 +21,50 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
+from typing import NoReturn
 
 __all__ = ["main"]
 
+EXIT_FAILURE = 1
 EXIT_BAD_INPUT = 2
 EXIT_NO_MERGE = 3
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report it
+
+
+def _seed(text: str) -> int:
+    """argparse type of a seed: a non-negative integer."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {value}")
+    return value
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the project's one-line error and exit status 2 (usage goes to -h)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="mrslam", description="Multi-robot SLAM research toolkit."
+    parser = _Parser(prog="mrslam", description="Multi-robot SLAM research toolkit.")
+    parser.add_argument(
+        "--debug", action="store_true", help="show the traceback of an unexpected failure"
     )
-    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    commands = parser.add_subparsers(
+        dest="command", required=True, metavar="COMMAND", parser_class=_Parser
+    )
 
     run = commands.add_parser("run", help="run the end-to-end experiment")
     run.add_argument("--scenario", default="office", help="scenario name (see `mrslam scenarios`)")
     run.add_argument("--map", type=Path, help="build the world from a ROS map YAML instead")
-    run.add_argument("--seed", type=int, default=0)
+    run.add_argument("--seed", type=_seed, default=0)
     run.add_argument(
         "--max-steps", type=int, default=3000, help="env steps of 0.1 s (default 3000)"
     )
@@ -60,10 +87,15 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     merge.add_argument("map1", type=Path, metavar="MAP1.yaml")
     merge.add_argument("map2", type=Path, metavar="MAP2.yaml")
-    merge.add_argument("-o", "--output", type=Path, help="write the merged map (ROS YAML + PGM)")
+    merge.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        help="write the merged map: NAME.yaml + NAME.pgm (NAME, NAME.yaml or NAME.pgm)",
+    )
     merge.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
     merge.add_argument("--rrd", type=Path, help="record the merge stages to this .rrd file")
-    merge.add_argument("--seed", type=int, default=0, help="seed of the randomised stages")
+    merge.add_argument("--seed", type=_seed, default=0, help="seed of the randomised stages")
 
     scen = commands.add_parser("scenarios", help="list the worlds, or export one as a ROS map")
     scen.add_argument(
@@ -88,7 +120,7 @@ def _build_parser() -> argparse.ArgumentParser:
     slam = kinds.add_parser("slam", help="onboard SLAM: ATE against odometry, map agreement, speed")
     slam.add_argument("--scenarios", nargs="*", help="scenario names (default: the built-in five)")
     slam.add_argument("--steps", type=int, default=3000, help="env steps per run (default 3000)")
-    slam.add_argument("--seed", type=int, default=0)
+    slam.add_argument("--seed", type=_seed, default=0)
     slam.add_argument("--json", action="store_true")
     explore = kinds.add_parser(
         "explore", help="time to 90% coverage with coordination against independent robots"
@@ -102,7 +134,7 @@ def _build_parser() -> argparse.ArgumentParser:
         "merge", help="map merging: success, wrong answers, refusals and time per method"
     )
     merge.add_argument("--pairs", type=int, default=40, help="map pairs (default 40)")
-    merge.add_argument("--seed", type=int, default=0)
+    merge.add_argument("--seed", type=_seed, default=0)
     merge.add_argument(
         "--methods",
         default="ours,random-walk,features",
@@ -167,21 +199,29 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _cmd_merge(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from mrslam_env.mapio import load_map, save_map
+    from mrslam_env.mapio import load_map, map_images, map_yaml_path, save_map
     from mrslam_env.merge.pipeline import merge_maps
 
     m1, m2 = load_map(args.map1), load_map(args.map2)
-    for path in (args.output, args.rrd):
-        if path is not None and not path.parent.is_dir():
-            raise ValueError(f"output folder {path.parent} does not exist")
-    result = merge_maps(m1, m2, rng=np.random.default_rng(args.seed), trace=args.rrd is not None)
+    inputs = [args.map1, args.map2, *map_images(args.map1, args.map2)]
+    outputs = []
+    if args.output is not None:
+        if args.output.is_dir():
+            raise ValueError(f"output {args.output} is a folder; name a file (NAME.yaml)")
+        output_yaml = map_yaml_path(args.output)
+        outputs += [output_yaml, output_yaml.with_suffix(".pgm")]
     if args.rrd is not None:
+        outputs.append(args.rrd)
+    check_outputs(outputs, inputs)
+    result = merge_maps(m1, m2, rng=np.random.default_rng(args.seed), trace=args.rrd is not None)
+    if result.fused is not None and args.output is not None:
+        args.output = save_map(args.output, result.fused)
+    if args.rrd is not None:
+        from mrslam_env.atomic import atomic_path
         from mrslam_env.recording import Recorder
 
-        with Recorder(args.rrd, n_robots=2) as recorder:
+        with atomic_path(args.rrd) as temporary, Recorder(temporary, n_robots=2) as recorder:
             recorder.log_merge(result, m1, m2)
-    if result.fused is not None and args.output is not None:
-        save_map(args.output, result.fused)
     if args.json:
         print(json.dumps(result.as_dict(), indent=2))
     elif result.transform is not None:
@@ -199,14 +239,21 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
     from mrslam_env.registry import available_scenarios, build_world
 
     if args.export:
-        from mrslam_env.mapio import save_map
+        from mrslam_env.mapio import check_grid_size, map_yaml_path, save_map
         from mrslam_env.sim.world import ground_truth_map
 
         name, out = args.export
         if not args.resolution > 0:
             raise ValueError(f"--resolution must be > 0, got {args.resolution}")
         world = build_world(name)
-        path = save_map(Path(out), ground_truth_map(world, args.resolution, margin=0.5))
+        xmin, ymin, xmax, ymax = world.bounds
+        check_grid_size(
+            ((ymax - ymin + 1.0) / args.resolution, (xmax - xmin + 1.0) / args.resolution),
+            f"{name} at {args.resolution} m/cell",
+        )
+        output_yaml = map_yaml_path(out)
+        check_outputs([output_yaml, output_yaml.with_suffix(".pgm")], [])
+        path = save_map(output_yaml, ground_truth_map(world, args.resolution, margin=0.5))
         print(f"wrote {path}")
         return 0
     catalogue = available_scenarios()
@@ -374,10 +421,54 @@ def main(argv: Sequence[str] | None = None) -> int:
     }
     try:
         return handlers[args.command](args)
-    except (ValueError, OSError) as error:
-        message = str(error).splitlines()[0] if str(error) else type(error).__name__
-        print(f"mrslam: error: {message}", file=sys.stderr)
+    except KeyboardInterrupt:
+        print("mrslam: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except (ValueError, OSError, MemoryError) as error:
+        if args.debug:
+            raise
+        print(f"mrslam: error: {_one_line(error)}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except Exception as error:
+        if args.debug:
+            raise
+        print(
+            f"mrslam: unexpected error: {type(error).__name__}: {_one_line(error)} "
+            "(run again with --debug for the traceback)",
+            file=sys.stderr,
+        )
+        return EXIT_FAILURE
+
+
+def _one_line(error: BaseException) -> str:
+    text = str(error).strip()
+    return text.splitlines()[0] if text else type(error).__name__
+
+
+def check_outputs(outputs: Sequence[Path], inputs: Sequence[Path]) -> None:
+    """Refuse, before any work, output files that would overwrite an input or cannot be
+    written: the same file as an input (also through links), an existing folder, a missing
+    or read-only folder.
+
+    Raises
+    ------
+    ValueError
+        Naming the output and the problem.
+    """
+    resolved_inputs = {Path(p).resolve() for p in inputs}
+    for output in outputs:
+        output = Path(output)
+        if output.resolve() in resolved_inputs:
+            raise ValueError(f"output {output} would overwrite an input file")
+        if output.is_dir():
+            raise ValueError(f"output {output} is a folder; name a file")
+        if not output.parent.is_dir():
+            raise ValueError(f"output folder {output.parent} does not exist")
+        try:  # the only sure test of "can be written here" is writing
+            with tempfile.TemporaryFile(dir=output.parent):
+                pass
+        except OSError as error:
+            raise ValueError(f"cannot write in {output.parent} ({error.strerror})") from None
 
 
 if __name__ == "__main__":

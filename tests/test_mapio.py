@@ -307,8 +307,31 @@ def test_bad_yaml_syntax(tmp_path: Path, text: str, message: str) -> None:
 MALFORMED_IMAGES = [
     ("not an image", b"hello, this is text\n", "unreadable image"),
     ("empty file", b"", r"empty image file \(0 bytes\)"),
-    ("truncated P5", b"P5\n4 3\n255\n" + bytes(5), r"PGM data truncated \(5 of 12 bytes\)"),
-    ("truncated P2", b"P2\n2 2\n255\n1 2 3\n", r"PGM data truncated \(3 of 4 values\)"),
+    (
+        "truncated P5",
+        b"P5\n4 3\n255\n" + bytes(5),
+        r"data is 5 bytes but the header says 4 x 3 = 12",
+    ),
+    (
+        "width one short",
+        b"P5\n3 3\n255\n" + bytes(12),
+        r"is 12 bytes but .* 3 x 3 = 9",
+    ),
+    (
+        "CRLF header",
+        b"P5\r\n4 3\r\n255\r\n" + bytes(12),
+        r"= 12 \(header lines end in CRLF\)",
+    ),
+    (
+        "truncated P2",
+        b"P2\n2 2\n255\n1 2 3\n",
+        r"has 3 values but the header says 2 x 2 = 4",
+    ),
+    (
+        "extra P2 values",
+        b"P2\n2 1\n255\n1 2 3\n",
+        r"has 3 values but .* 2 x 1 = 2",
+    ),
     ("16-bit PGM", b"P5\n2 1\n65535\n" + bytes(4), "16-bit images are not supported"),
     ("zero width", b"P5\n0 3\n255\n", r"empty image \(0 x 3 pixels\)"),
     ("header text", b"P5\nwide 3\n255\n", "corrupt PGM header: width"),
