@@ -13,6 +13,10 @@ name            size (m)     character
 ``twin_wings``  32 x 14      two identical wings: a trap for map merging
 ``procedural``  18-28 sides  seeded office-like floor plans (``build(seed)``)
 ==============  ===========  ====================================================
+
+Real buildings (:mod:`scenarios.worlds.real`, SLAM maps of real places):
+``aws_warehouse``, ``aws_warehouse_lowres``, ``bookstore``, ``small_house``,
+``tb3_sandbox``, ``planner_test``; ``mrslam scenarios`` lists their sizes.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ from types import MappingProxyType
 from mrslam_env.sim.world import WorldSpec
 from scenarios.worlds import buildings
 from scenarios.worlds.procedural import build_procedural
+from scenarios.worlds.real import REAL_BUILDINGS, build_real
 
 __all__ = ["DEFAULT_SCENARIO", "SCENARIOS", "Scenario"]
 
@@ -90,6 +95,14 @@ SCENARIOS: Mapping[str, Scenario] = MappingProxyType(
                 "(18-28 m; build(seed))",
                 build=build_procedural,
                 parametric=True,
+            ),
+            *(
+                Scenario(
+                    name=name,
+                    description=f"real building: {what}",
+                    build=lambda variant, name=name: build_real(name),
+                )
+                for name, what in REAL_BUILDINGS.items()
             ),
         )
     }
