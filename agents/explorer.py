@@ -40,9 +40,11 @@ from agents.planning import (
     inflate,
     shorten_path,
 )
+from mrslam_env.config import EnvConfig
 from mrslam_env.geometry import compose, transform_points, world_to_cell
 from mrslam_env.gridmap import OCCUPIED, GridMap
 from mrslam_env.slam.scan import mask_returns_near, sighted_positions
+from mrslam_env.validation import check_fields, require
 
 __all__ = [
     "ExplorerConfig",
@@ -63,7 +65,8 @@ ExplorerStatus = Literal[
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ExplorerConfig:
-    """Tuning of :class:`ExplorerPolicy`."""
+    """Tuning of :class:`ExplorerPolicy`. The robot's figures are in ``planner`` (radius)
+    and ``follower`` (speeds, period): :meth:`for_env` sets both from the env."""
 
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     frontiers: FrontierConfig = field(default_factory=FrontierConfig)
@@ -105,25 +108,37 @@ class ExplorerConfig:
     """Scale of the random tie-breaking noise added to utilities, m²."""
 
     def __post_init__(self) -> None:
-        non_negative = ("cost_weight", "min_gain", "target_bonus", "tie_jitter")
-        for name in non_negative:
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"ExplorerConfig.{name} must be >= 0, got {value!r}")
-        positive = ("separation", "blocked_lookahead", "blacklist_radius", "goal_snap")
-        for name in (*positive, "start_snap"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"ExplorerConfig.{name} must be > 0 m, got {value!r}")
-        for name in ("replan_interval", "min_replan_interval", "blacklist_steps", "done_after"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise ValueError(f"ExplorerConfig.{name} must be an int >= 1, got {value!r}")
-        if not 0 <= self.target_gone_fraction <= 1:
-            raise ValueError(
-                "ExplorerConfig.target_gone_fraction must be in [0, 1], "
-                f"got {self.target_gone_fraction!r}"
-            )
+        check_fields(
+            self,
+            non_negative=("cost_weight", "min_gain", "target_bonus", "tie_jitter"),
+            positive=(
+                "separation",
+                "blocked_lookahead",
+                "blacklist_radius",
+                "goal_snap",
+                "start_snap",
+            ),
+            counts=("replan_interval", "min_replan_interval", "blacklist_steps", "done_after"),
+        )
+        fraction = self.target_gone_fraction
+        ok = 0 <= fraction <= 1
+        require(type(self).__name__, "target_gone_fraction", fraction, ok, "in [0, 1]")
+
+    @classmethod
+    def for_env(cls, env: EnvConfig, **overrides: Any) -> ExplorerConfig:
+        """The explorer for the env's robot: ``planner`` and ``follower`` from their
+        ``for_env`` unless given (then checked against the env); ``overrides`` set the
+        tuning fields."""
+        overrides.setdefault("planner", PlannerConfig.for_env(env))
+        overrides.setdefault("follower", FollowerConfig.for_env(env))
+        config = cls(**overrides)
+        config.check_env(env)
+        return config
+
+    def check_env(self, env: EnvConfig) -> None:
+        """Raise a ``ValueError`` if the planner or follower contradicts the env's robot."""
+        self.planner.check_env(env)
+        self.follower.check_env(env)
 
 
 def frontier_utility(
@@ -325,6 +340,7 @@ class ExplorerPolicy:
     rng : numpy.random.Generator
         Breaks ties between frontiers of equal utility.
     config : ExplorerConfig, optional
+        Defaults to the default env's robot; :meth:`for_env` follows a given env's.
 
     Attributes
     ----------
@@ -342,6 +358,17 @@ class ExplorerPolicy:
         self.rng = rng
         self.follower = PathFollower(self.config.follower)
         self.reset()
+
+    @classmethod
+    def for_env(
+        cls, env: EnvConfig, rng: np.random.Generator, config: ExplorerConfig | None = None
+    ) -> ExplorerPolicy:
+        """An explorer for the env's robot: ``config`` (checked against the env) or
+        :meth:`ExplorerConfig.for_env`."""
+        if config is None:
+            config = ExplorerConfig.for_env(env)
+        config.check_env(env)
+        return cls(rng, config)
 
     def reset(self) -> None:
         """Forget plans, goals, frontiers and blacklists (a new episode)."""

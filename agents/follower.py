@@ -20,12 +20,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from agents.robot import DEFAULT_ENV, EnvFigures, build_for_env, check_against_env
+from mrslam_env.config import EnvConfig
 from mrslam_env.geometry import wrap_scalar
+from mrslam_env.validation import check_fields, require
 
 __all__ = [
     "FollowerConfig",
@@ -44,15 +47,16 @@ FollowerStatus = Literal["idle", "following", "reached", "recovering"]
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class FollowerConfig:
-    """Tuning of :class:`PathFollower`. Speeds in SI units; the action scale comes from
-    the robot (``RobotConfig.max_speed`` and ``max_turn_rate``)."""
+    """Tuning of :class:`PathFollower`. Speeds in SI units; the action scale and the
+    control period are the env's (``max_speed``, ``max_turn_rate``, ``dt``: set by
+    :meth:`for_env`, checked by :meth:`check_env`)."""
 
-    max_speed: float = 1.0
-    """Linear speed at action 1, m/s (``RobotConfig.max_speed``)."""
-    max_turn_rate: float = 2.0
-    """Angular speed at action 1, rad/s (``RobotConfig.max_turn_rate``)."""
-    dt: float = 0.1
-    """Control period, s (``EnvConfig.dt``)."""
+    max_speed: float = DEFAULT_ENV.robot.max_speed
+    """Linear speed at action 1, m/s: the env's ``RobotConfig.max_speed``."""
+    max_turn_rate: float = DEFAULT_ENV.robot.max_turn_rate
+    """Angular speed at action 1, rad/s: the env's ``RobotConfig.max_turn_rate``."""
+    dt: float = DEFAULT_ENV.dt
+    """Control period, s: the env's ``EnvConfig.dt``."""
     cruise_speed: float = 0.8
     """Speed on straight stretches, m/s (<= max_speed)."""
     min_speed: float = 0.08
@@ -88,49 +92,62 @@ class FollowerConfig:
     """Backing-up speed in recovery, m/s."""
 
     def __post_init__(self) -> None:
-        positive = (
-            "max_speed",
-            "max_turn_rate",
-            "dt",
-            "cruise_speed",
-            "min_speed",
-            "lookahead",
-            "goal_tolerance",
-            "goal_deceleration",
-            "turn_gain",
-            "max_linear_acceleration",
-            "max_angular_acceleration",
-            "stuck_distance",
-            "stuck_angle",
-            "recovery_speed",
+        check_fields(
+            self,
+            positive=(
+                "max_speed",
+                "max_turn_rate",
+                "dt",
+                "cruise_speed",
+                "min_speed",
+                "lookahead",
+                "goal_tolerance",
+                "goal_deceleration",
+                "turn_gain",
+                "max_linear_acceleration",
+                "max_angular_acceleration",
+                "stuck_distance",
+                "stuck_angle",
+                "recovery_speed",
+            ),
+            non_negative=("stop_distance",),
+            counts=("stuck_steps", "recovery_reverse_steps", "recovery_turn_steps"),
         )
-        for name in positive:
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"FollowerConfig.{name} must be > 0, got {value!r}")
-        if not math.isfinite(self.stop_distance) or self.stop_distance < 0:
-            raise ValueError(
-                f"FollowerConfig.stop_distance must be >= 0 m, got {self.stop_distance!r}"
-            )
-        if self.cruise_speed > self.max_speed or self.min_speed > self.cruise_speed:
-            raise ValueError(
-                "FollowerConfig needs min_speed <= cruise_speed <= max_speed, got "
-                f"{self.min_speed}, {self.cruise_speed}, {self.max_speed}"
-            )
-        if self.recovery_speed > self.max_speed:
-            raise ValueError(
-                f"FollowerConfig.recovery_speed must be <= max_speed ({self.max_speed}), "
-                f"got {self.recovery_speed!r}"
-            )
-        if not 0 < self.turn_in_place_angle <= math.pi:
-            raise ValueError(
-                "FollowerConfig.turn_in_place_angle must be in (0, pi], "
-                f"got {self.turn_in_place_angle!r}"
-            )
-        for name in ("stuck_steps", "recovery_reverse_steps", "recovery_turn_steps"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise ValueError(f"FollowerConfig.{name} must be an int >= 1, got {value!r}")
+        name = type(self).__name__
+        require(
+            name,
+            "cruise_speed",
+            self.cruise_speed,
+            self.min_speed <= self.cruise_speed <= self.max_speed,
+            f"between min_speed ({self.min_speed}) and max_speed ({self.max_speed})",
+        )
+        require(
+            name,
+            "recovery_speed",
+            self.recovery_speed,
+            self.recovery_speed <= self.max_speed,
+            f"<= max_speed ({self.max_speed})",
+        )
+        angle = self.turn_in_place_angle
+        require(name, "turn_in_place_angle", angle, 0 < angle <= math.pi, "in (0, pi]")
+
+    @staticmethod
+    def env_figures(env: EnvConfig) -> EnvFigures:
+        """The fields that are the env's figures: the speeds at action 1, the period."""
+        return {
+            "max_speed": ("robot.max_speed", env.robot.max_speed),
+            "max_turn_rate": ("robot.max_turn_rate", env.robot.max_turn_rate),
+            "dt": ("dt", env.dt),
+        }
+
+    @classmethod
+    def for_env(cls, env: EnvConfig, **overrides: Any) -> FollowerConfig:
+        """The follower for the env's robot; ``overrides`` set the tuning fields."""
+        return build_for_env(cls, cls.env_figures(env), overrides)
+
+    def check_env(self, env: EnvConfig) -> None:
+        """Raise a ``ValueError`` if this config contradicts the env's robot or period."""
+        check_against_env(self, self.env_figures(env))
 
 
 def lookahead_target(
@@ -319,6 +336,7 @@ class PathFollower:
     Parameters
     ----------
     config : FollowerConfig, optional
+        Defaults to the default env's robot; :meth:`for_env` follows a given env's.
     """
 
     def __init__(self, config: FollowerConfig | None = None) -> None:
@@ -331,6 +349,15 @@ class PathFollower:
         self._recovery_left = 0
         self.status: FollowerStatus = "idle"
         self.stuck_events = 0
+
+    @classmethod
+    def for_env(cls, env: EnvConfig, config: FollowerConfig | None = None) -> PathFollower:
+        """A follower for the env's robot: ``config`` (checked against the env) or
+        :meth:`FollowerConfig.for_env`."""
+        if config is None:
+            config = FollowerConfig.for_env(env)
+        config.check_env(env)
+        return cls(config)
 
     @property
     def path(self) -> FloatArray:

@@ -29,6 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
 from mrslam_env.gridmap import GridMap
+from mrslam_env.validation import check_fields, require
 
 __all__ = [
     "FrontierConfig",
@@ -85,35 +86,22 @@ class FrontierConfig:
     frontiers with no reachable cell this close are dropped (> 0)."""
 
     def __post_init__(self) -> None:
-        if self.connectivity not in (4, 8):
-            raise ValueError(
-                f"FrontierConfig.connectivity must be 4 or 8, got {self.connectivity!r}"
-            )
-        width = self.min_free_width
-        if not isinstance(width, int) or isinstance(width, bool) or width < 1:
-            raise ValueError(f"FrontierConfig.min_free_width must be an int >= 1, got {width!r}")
-        for name in ("min_unknown_area", "min_size"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"FrontierConfig.{name} must be >= 0, got {value!r}")
-        for name in ("sensor_range", "max_goal_offset", "view_depth"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"FrontierConfig.{name} must be > 0 m, got {value!r}")
-        if self.gain_model not in ("box", "connected"):
-            raise ValueError(
-                f"FrontierConfig.gain_model must be 'box' or 'connected', got {self.gain_model!r}"
-            )
-        if not 0 <= self.min_open_fraction <= 1:
-            raise ValueError(
-                "FrontierConfig.min_open_fraction must be in [0, 1], "
-                f"got {self.min_open_fraction!r}"
-            )
-        if not (math.isfinite(self.max_size) and self.max_size > self.min_size):
-            raise ValueError(
-                f"FrontierConfig.max_size must be > min_size ({self.min_size}), "
-                f"got {self.max_size!r}"
-            )
+        name = type(self).__name__
+        connectivity = self.connectivity
+        require(name, "connectivity", connectivity, connectivity in (4, 8), "4 or 8")
+        check_fields(
+            self,
+            counts=("min_free_width",),
+            non_negative=("min_unknown_area", "min_size"),
+            positive=("sensor_range", "max_goal_offset", "view_depth"),
+        )
+        model = self.gain_model
+        require(name, "gain_model", model, model in ("box", "connected"), "'box' or 'connected'")
+        fraction = self.min_open_fraction
+        require(name, "min_open_fraction", fraction, 0 <= fraction <= 1, "in [0, 1]")
+        size = self.max_size
+        ok = isinstance(size, int | float) and math.isfinite(size) and size > self.min_size
+        require(name, "max_size", size, ok, f"a finite number > min_size ({self.min_size})")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True, eq=False)

@@ -24,15 +24,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
+from agents.robot import DEFAULT_ENV, EnvFigures, build_for_env, check_against_env
+from mrslam_env.config import EnvConfig
 from mrslam_env.geometry import cell_to_world, world_to_cell
 from mrslam_env.gridmap import GridMap
+from mrslam_env.validation import check_fields, require
 
 __all__ = [
     "CostGrid",
@@ -61,8 +64,8 @@ _NEIGHBOUR_COLS = np.array([0, 0, 1, -1, 1, -1, 1, -1], dtype=np.int64)
 class PlannerConfig:
     """How a map becomes a cost grid."""
 
-    robot_radius: float = 0.2
-    """Footprint radius, m (``RobotConfig.radius``)."""
+    robot_radius: float = DEFAULT_ENV.robot.radius
+    """Footprint radius, m: the env's ``RobotConfig.radius`` (:meth:`for_env`)."""
     safety_margin: float = 0.08
     """Added to the radius: a cell whose centre is closer than ``robot_radius +
     safety_margin`` to an OCCUPIED cell's centre is blocked, m (>= 0)."""
@@ -79,20 +82,31 @@ class PlannerConfig:
     """Cost multiplier of an UNKNOWN cell when ``unknown == "costly"`` (>= 1)."""
 
     def __post_init__(self) -> None:
-        for name in ("robot_radius",):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"PlannerConfig.{name} must be > 0 m, got {value!r}")
-        for name in ("safety_margin", "clearance", "clearance_cost"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"PlannerConfig.{name} must be >= 0, got {value!r}")
-        if self.unknown not in ("blocked", "costly"):
-            raise ValueError(
-                f"PlannerConfig.unknown must be 'blocked' or 'costly', got {self.unknown!r}"
-            )
-        if not (math.isfinite(self.unknown_cost) and self.unknown_cost >= 1):
-            raise ValueError(f"PlannerConfig.unknown_cost must be >= 1, got {self.unknown_cost!r}")
+        check_fields(
+            self,
+            positive=("robot_radius",),
+            non_negative=("safety_margin", "clearance", "clearance_cost"),
+        )
+        name = type(self).__name__
+        unknown = self.unknown
+        require(name, "unknown", unknown, unknown in ("blocked", "costly"), "'blocked' or 'costly'")
+        cost = self.unknown_cost
+        ok = isinstance(cost, int | float) and math.isfinite(cost) and cost >= 1
+        require(name, "unknown_cost", cost, ok, "a finite number >= 1")
+
+    @staticmethod
+    def env_figures(env: EnvConfig) -> EnvFigures:
+        """The fields that are the env's figures: the robot's radius."""
+        return {"robot_radius": ("robot.radius", env.robot.radius)}
+
+    @classmethod
+    def for_env(cls, env: EnvConfig, **overrides: Any) -> PlannerConfig:
+        """The planner for the env's robot; ``overrides`` set the tuning fields."""
+        return build_for_env(cls, cls.env_figures(env), overrides)
+
+    def check_env(self, env: EnvConfig) -> None:
+        """Raise a ``ValueError`` if this config contradicts the env's robot."""
+        check_against_env(self, self.env_figures(env))
 
     @property
     def blocked_radius(self) -> float:

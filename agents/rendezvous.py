@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from mrslam_env.geometry import compose, inverse, transform_points, wrap_scalar
 from mrslam_env.gridmap import GridMap
+from mrslam_env.validation import check_fields
 
 __all__ = [
     "RendezvousConfig",
@@ -62,14 +63,11 @@ class RendezvousConfig:
     hypothesis is set aside unjudged (not rejected: it is proposed again later)."""
 
     def __post_init__(self) -> None:
-        for name in ("position_tolerance", "heading_tolerance", "confirm_motion"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"RendezvousConfig.{name} must be > 0, got {value!r}")
-        for name in ("wait_steps", "timeout_steps", "confirm_sightings", "confirm_steps"):
-            value = getattr(self, name)
-            if not (isinstance(value, int) and value >= 1):
-                raise ValueError(f"RendezvousConfig.{name} must be an int >= 1, got {value!r}")
+        check_fields(
+            self,
+            positive=("position_tolerance", "heading_tolerance", "confirm_motion"),
+            counts=("wait_steps", "timeout_steps", "confirm_sightings", "confirm_steps"),
+        )
 
 
 @dataclass(frozen=True, slots=True)

@@ -40,6 +40,8 @@ from agents.rendezvous import (
     predicted_relative_pose,
     sighting_pose,
 )
+from agents.robot import DEFAULT_ENV, EnvFigures, build_for_env, check_against_env
+from mrslam_env.config import EnvConfig
 from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import GridMap
 from mrslam_env.merge.fuse import fuse_maps, resample_map
@@ -50,6 +52,7 @@ from mrslam_env.merge.pipeline import (
     refine_transform,
     same_answer,
 )
+from mrslam_env.validation import check_fields, require
 
 __all__ = [
     "Decision",
@@ -72,16 +75,22 @@ class TeamState(StrEnum):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class TeamConfig:
-    """How the team decides."""
+    """How the team decides. The robot's and the peer sensor's figures are in
+    ``explorer`` and ``peer_range``: :meth:`for_env` sets them from the env."""
 
     explorer: ExplorerConfig = field(default_factory=ExplorerConfig)
     merge: MergeConfig = field(default_factory=lambda: MergeConfig(correlation_candidates=0))
     """The merge of the exchanged maps. Live, the wall correlation's proposals are left
-    out (``correlation_candidates=0``): offline they recover small overlaps, but in a
-    building with repeated parts they add confident aliased placements, and live each
-    one costs a rendezvous drive (twin_wings, 10 seeds: t90 78 s -> 131 s, hypotheses
-    tested 20 -> 49)."""
+    out (``correlation_candidates=0``): in a building with repeated parts they add
+    confident aliased placements, and live each one costs a rendezvous drive."""
     rendezvous: RendezvousConfig = field(default_factory=RendezvousConfig)
+    peer_range: float = DEFAULT_ENV.peer.detect_range
+    """The peer sensor's detection range, m: the env's ``PeerSensorConfig.detect_range``
+    (:meth:`for_env`)."""
+    sight_margin: float = 1.0
+    """A hypothesis that puts the robots closer than ``peer_range - sight_margin``
+    (:attr:`in_sight_range`, m) is verified where they stand, without a rendezvous drive;
+    the margin keeps the prediction's error inside the sensor's range (m, >= 0)."""
     interaction: bool = True
     """False: the robots never interact (the independent-exploration baseline)."""
     min_map_area: float = 15.0
@@ -103,25 +112,49 @@ class TeamConfig:
     """Steps between re-refinements of the transform on the grown maps (0: never, the
     default). The relation between the map frames is a constant, best estimated when it
     is verified, from maps that carry little drift yet; maps grown later carry more, and
-    re-refining on them trades the frames' relation for local alignment (measured on
-    maze and twin_wings, 5 seeds each: largest error 0.134 m re-refining every 400
-    steps against 0.086 m never)."""
+    re-refining on them trades the frames' relation for local alignment."""
 
     def __post_init__(self) -> None:
-        for name in ("min_map_area", "max_meeting_cost"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"TeamConfig.{name} must be >= 0, got {value!r}")
-        if not (math.isfinite(self.regrow_factor) and self.regrow_factor >= 1):
-            raise ValueError(f"TeamConfig.regrow_factor must be >= 1, got {self.regrow_factor!r}")
-        for name in ("max_rendezvous", "merged_map_every"):
-            value = getattr(self, name)
-            if not (isinstance(value, int) and value >= 1):
-                raise ValueError(f"TeamConfig.{name} must be an int >= 1, got {value!r}")
-        if not (isinstance(self.refine_every, int) and self.refine_every >= 0):
-            raise ValueError(
-                f"TeamConfig.refine_every must be an int >= 0, got {self.refine_every!r}"
-            )
+        check_fields(
+            self,
+            non_negative=("min_map_area", "max_meeting_cost", "sight_margin"),
+            positive=("peer_range",),
+            counts=("max_rendezvous", "merged_map_every"),
+        )
+        name = type(self).__name__
+        factor = self.regrow_factor
+        ok = isinstance(factor, int | float) and math.isfinite(factor) and factor >= 1
+        require(name, "regrow_factor", factor, ok, "a finite number >= 1")
+        every = self.refine_every
+        ok = isinstance(every, int) and not isinstance(every, bool) and every >= 0
+        require(name, "refine_every", every, ok, "an int >= 0")
+        margin, peer_range = self.sight_margin, self.peer_range
+        require(name, "sight_margin", margin, margin < peer_range, f"< peer_range ({peer_range})")
+
+    @property
+    def in_sight_range(self) -> float:
+        """Closer than this (m) the robots are in the peer sensor's sight, with a margin."""
+        return self.peer_range - self.sight_margin
+
+    @staticmethod
+    def env_figures(env: EnvConfig) -> EnvFigures:
+        """The fields that are the env's figures: the peer sensor's range."""
+        return {"peer_range": ("peer.detect_range", env.peer.detect_range)}
+
+    @classmethod
+    def for_env(cls, env: EnvConfig, **overrides: Any) -> TeamConfig:
+        """The team for the env's robots and sensors: ``explorer`` from
+        :meth:`ExplorerConfig.for_env` unless given (then checked against the env),
+        ``peer_range`` from the env; ``overrides`` set the tuning fields."""
+        overrides.setdefault("explorer", ExplorerConfig.for_env(env))
+        config = build_for_env(cls, cls.env_figures(env), overrides)
+        config.check_env(env)
+        return config
+
+    def check_env(self, env: EnvConfig) -> None:
+        """Raise a ``ValueError`` if this config contradicts the env's robot or sensors."""
+        check_against_env(self, self.env_figures(env))
+        self.explorer.check_env(env)
 
 
 @dataclass(frozen=True, slots=True)
@@ -157,10 +190,6 @@ class _Rendezvous:
 
 MapSource = Callable[[int], GridMap]
 
-IN_SIGHT_RANGE = 4.0
-"""A hypothesis that puts the robots closer than this (m, inside the 5 m peer sensor's
-range with a margin) is verified where they stand, without a rendezvous drive."""
-
 
 SIGHT_BAND = (-0.25, 0.0, 0.25)
 """Offsets (m) of the lines of sight checked side by side."""
@@ -170,13 +199,15 @@ UNSEEN_STEPS = 10
 is rejected there and then."""
 
 
-def in_plain_sight(pose: FloatArray, predicted: FloatArray, grid: GridMap) -> bool:
+def in_plain_sight(
+    pose: FloatArray, predicted: FloatArray, grid: GridMap, *, sight_range: float
+) -> bool:
     """Whether a robot at ``predicted`` (its pose in the observer's body frame) would be
     in the peer sensor's sight from ``pose`` (the observer's pose in ``grid``): closer than
-    :data:`IN_SIGHT_RANGE` and further than 0.5 m, across cells ``grid`` knows to be free
-    all the way, in a band :data:`SIGHT_BAND` wide."""
+    ``sight_range`` (m, :attr:`TeamConfig.in_sight_range`) and further than 0.5 m, across
+    cells ``grid`` knows to be free all the way, in a band :data:`SIGHT_BAND` wide."""
     distance = float(np.hypot(predicted[0], predicted[1]))
-    if not 0.5 < distance < IN_SIGHT_RANGE:
+    if not 0.5 < distance < sight_range:
         return False
     start = pose[:2]
     end = transform_points(pose, predicted[None, :2])[0]
@@ -205,11 +236,14 @@ def distinct_hypotheses(
     return kept
 
 
-def _either_in_sight(poses: list[FloatArray], predicted: FloatArray, maps: MapSource) -> bool:
-    """Whether either robot would have the other in plain sight, each judged on its own
-    map, given robot 1's ``predicted`` pose in robot 0's body frame."""
-    return in_plain_sight(poses[0], predicted, maps(0)) or in_plain_sight(
-        poses[1], inverse(predicted), maps(1)
+def _either_in_sight(
+    poses: list[FloatArray], predicted: FloatArray, maps: MapSource, sight_range: float
+) -> bool:
+    """Whether either robot would have the other in plain sight (closer than
+    ``sight_range``, m), each judged on its own map, given robot 1's ``predicted`` pose in
+    robot 0's body frame."""
+    return in_plain_sight(poses[0], predicted, maps(0), sight_range=sight_range) or (
+        in_plain_sight(poses[1], inverse(predicted), maps(1), sight_range=sight_range)
     )
 
 
@@ -220,6 +254,8 @@ class TeamCoordinator:
     Parameters
     ----------
     config : TeamConfig
+        Defaults to the default env's robots and sensors; :meth:`for_env` follows a given
+        env's.
     rng : numpy.random.Generator
         All randomness (explorers' tie-breaking, merging).
 
@@ -270,6 +306,17 @@ class TeamCoordinator:
         self._shared: list[tuple[FloatArray | None, FloatArray | None]] = [(None, None)] * 2
         """Per robot, its position and target in map 0's frame as last shared over the
         link (coordinated exploration)."""
+
+    @classmethod
+    def for_env(
+        cls, env: EnvConfig, *, rng: np.random.Generator, config: TeamConfig | None = None
+    ) -> TeamCoordinator:
+        """A team for the env's robots and sensors: ``config`` (checked against the env)
+        or :meth:`TeamConfig.for_env`."""
+        if config is None:
+            config = TeamConfig.for_env(env)
+        config.check_env(env)
+        return cls(config, rng=rng)
 
     # --- what recording reads -----------------------------------------------------------
 
@@ -428,14 +475,16 @@ class TeamCoordinator:
             return None  # robot 1's pose is only known over the link
         predicted = predicted_relative_pose(self._last_poses[0], self._last_poses[1], hypothesis)
         distance = float(np.hypot(predicted[0], predicted[1]))
-        if not 0.5 < distance < IN_SIGHT_RANGE:
+        if not 0.5 < distance < self.config.in_sight_range:
             return None
         peer = self._last_observations[0]["peer"][0]
         if peer[0] > 0.5:
             seen = sighting_pose(peer[1], peer[2], peer[3])
             return judge_sighting(seen, predicted, self.config.rendezvous).matches
         # Not seen: only a rejection if the line of sight is known free in robot 0's map.
-        return False if in_plain_sight(self._last_poses[0], predicted, map0) else None
+        sight_range = self.config.in_sight_range
+        seen_free = in_plain_sight(self._last_poses[0], predicted, map0, sight_range=sight_range)
+        return False if seen_free else None
 
     def _meeting_point(
         self, hypothesis: FloatArray, maps: MapSource
@@ -499,7 +548,10 @@ class TeamCoordinator:
                 break
             else:
                 # Nobody seen: does the hypothesis put the other robot in plain sight?
-                if rendezvous.first_match is None and _either_in_sight(poses, predicted, maps):
+                sight_range = self.config.in_sight_range
+                if rendezvous.first_match is None and _either_in_sight(
+                    poses, predicted, maps, sight_range
+                ):
                     rendezvous.unseen += 1
                     if rendezvous.unseen >= UNSEEN_STEPS:
                         self._reject(
@@ -547,7 +599,7 @@ class TeamCoordinator:
             if any(hypothesis is rejected for rejected in self.rejected):
                 continue
             predicted = predicted_relative_pose(poses[0], poses[1], hypothesis)
-            if not _either_in_sight(poses, predicted, maps):
+            if not _either_in_sight(poses, predicted, maps, self.config.in_sight_range):
                 rendezvous.others_unseen[index] = 0
                 continue
             unseen = rendezvous.others_unseen.get(index, 0) + 1

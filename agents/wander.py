@@ -8,9 +8,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
+from agents.robot import DEFAULT_ENV, EnvFigures, build_for_env, check_against_env
+from mrslam_env.config import EnvConfig
+from mrslam_env.validation import check_fields, require
 
 __all__ = ["WanderConfig", "WanderPolicy"]
 
@@ -19,8 +24,8 @@ __all__ = ["WanderConfig", "WanderPolicy"]
 class WanderConfig:
     """Tuning of :class:`WanderPolicy`; distances are from the robot centre."""
 
-    robot_radius: float = 0.2
-    """Footprint radius, m."""
+    robot_radius: float = DEFAULT_ENV.robot.radius
+    """Footprint radius, m: the env's ``RobotConfig.radius`` (:meth:`for_env`)."""
     stop_distance: float = 0.55
     """Closer than this ahead: stop and turn in place, m."""
     slow_distance: float = 1.5
@@ -35,20 +40,33 @@ class WanderConfig:
     """How much of the previous random turn carries over to the next step, in [0, 1)."""
 
     def __post_init__(self) -> None:
-        if not 0 < self.robot_radius < self.stop_distance < self.slow_distance:
-            raise ValueError(
-                "WanderConfig needs 0 < robot_radius < stop_distance < slow_distance, got "
-                f"{self.robot_radius}, {self.stop_distance}, {self.slow_distance}"
-            )
-        if not 0 < self.cruise_speed <= 1:
-            raise ValueError(
-                f"WanderConfig.cruise_speed must be in (0, 1], got {self.cruise_speed}"
-            )
-        if not 0 <= self.meander_persistence < 1:
-            raise ValueError(
-                "WanderConfig.meander_persistence must be in [0, 1), "
-                f"got {self.meander_persistence}"
-            )
+        check_fields(
+            self,
+            positive=("robot_radius", "stop_distance", "slow_distance", "front_half_angle"),
+            non_negative=("meander",),
+        )
+        name = type(self).__name__
+        radius, stop, slow = self.robot_radius, self.stop_distance, self.slow_distance
+        require(name, "robot_radius", radius, radius < stop, f"< stop_distance ({stop})")
+        require(name, "slow_distance", slow, stop < slow, f"> stop_distance ({stop})")
+        speed = self.cruise_speed
+        require(name, "cruise_speed", speed, 0 < speed <= 1, "in (0, 1]")
+        persistence = self.meander_persistence
+        require(name, "meander_persistence", persistence, 0 <= persistence < 1, "in [0, 1)")
+
+    @staticmethod
+    def env_figures(env: EnvConfig) -> EnvFigures:
+        """The fields that are the env's figures: the robot's radius."""
+        return {"robot_radius": ("robot.radius", env.robot.radius)}
+
+    @classmethod
+    def for_env(cls, env: EnvConfig, **overrides: Any) -> WanderConfig:
+        """The policy's tuning for the env's robot; ``overrides`` set the tuning fields."""
+        return build_for_env(cls, cls.env_figures(env), overrides)
+
+    def check_env(self, env: EnvConfig) -> None:
+        """Raise a ``ValueError`` if this config contradicts the env's robot."""
+        check_against_env(self, self.env_figures(env))
 
 
 class WanderPolicy:
@@ -57,9 +75,11 @@ class WanderPolicy:
     Parameters
     ----------
     n_beams : int
-        Beams per scan; beam i points at ``-pi + i 2pi/N`` from the heading.
+        Beams per scan; beam i points at ``-pi + i 2pi/N`` from the heading (the env's
+        ``LidarConfig.n_beams``: :meth:`for_env` reads it there).
     rng : numpy.random.Generator
     config : WanderConfig
+        Defaults to the default env's robot; :meth:`for_env` follows a given env's.
     """
 
     def __init__(
@@ -73,6 +93,17 @@ class WanderPolicy:
         self._right = (self.angles < -self.config.front_half_angle) & (self.angles > -2.0)
         self._random_turn = 0.0
         self._escape_direction = 0.0
+
+    @classmethod
+    def for_env(
+        cls, env: EnvConfig, rng: np.random.Generator, config: WanderConfig | None = None
+    ) -> WanderPolicy:
+        """A policy for the env's robot and lidar (``env.lidar.n_beams``): ``config``
+        (checked against the env) or :meth:`WanderConfig.for_env`."""
+        if config is None:
+            config = WanderConfig.for_env(env)
+        config.check_env(env)
+        return cls(env.lidar.n_beams, rng, config)
 
     def act(self, scan: NDArray[np.floating]) -> NDArray[np.float32]:
         """One action for one scan (N,) of ranges in metres."""

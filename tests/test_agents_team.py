@@ -157,18 +157,26 @@ def test_plain_sight_needs_known_free_space_all_the_way() -> None:
     grid = GridMap(cells=cells, resolution=0.1)
     observer = np.array([2.0, 3.0, np.pi / 2])  # facing +y: body x is world y
     ahead = np.array([0.0, -2.0, 0.0])  # 2 m to its right, at world (4, 3)
-    assert in_plain_sight(observer, ahead, grid)
-    assert not in_plain_sight(observer, np.array([0.0, -4.5, 0.0]), grid)  # too far
-    assert not in_plain_sight(observer, np.array([0.0, -0.3, 0.0]), grid)  # touching
+    sight = TeamConfig().in_sight_range  # 4 m: the 5 m peer sensor less a 1 m margin
+    assert sight == 4.0
+    assert in_plain_sight(observer, ahead, grid, sight_range=sight)
+    too_far = np.array([0.0, -4.5, 0.0])
+    assert not in_plain_sight(observer, too_far, grid, sight_range=sight)
+    assert in_plain_sight(observer, too_far, grid, sight_range=5.0)  # a longer-range sensor
+    touching = np.array([0.0, -0.3, 0.0])
+    assert not in_plain_sight(observer, touching, grid, sight_range=sight)
     wall = cells.copy()
     wall[:, 30] = OCCUPIED  # x = 3.0 m, across the line
-    assert not in_plain_sight(observer, ahead, GridMap(cells=wall, resolution=0.1))
+    walled = GridMap(cells=wall, resolution=0.1)
+    assert not in_plain_sight(observer, ahead, walled, sight_range=sight)
     beside = cells.copy()
     beside[32:40, 25:35] = OCCUPIED  # a post 0.2 m beside the line
-    assert not in_plain_sight(observer, ahead, GridMap(cells=beside, resolution=0.1))
+    posted = GridMap(cells=beside, resolution=0.1)
+    assert not in_plain_sight(observer, ahead, posted, sight_range=sight)
     unknown = cells.copy()
     unknown[28:33, 35] = UNKNOWN  # not known to be free
-    assert not in_plain_sight(observer, ahead, GridMap(cells=unknown, resolution=0.1))
+    unmapped = GridMap(cells=unknown, resolution=0.1)
+    assert not in_plain_sight(observer, ahead, unmapped, sight_range=sight)
 
 
 def test_with_the_link_down_each_robot_sees_all_of_its_own_mapping() -> None:

@@ -65,6 +65,16 @@ class Scenario:
 
 DEFAULT_SCENARIO = "office"
 
+
+def _real_builder(name: str) -> Callable[[int], WorldSpec]:
+    """A real building's build function: one world, whatever the variant."""
+
+    def build(variant: int) -> WorldSpec:
+        return build_real(name)
+
+    return build
+
+
 SCENARIOS: Mapping[str, Scenario] = MappingProxyType(
     {
         scenario.name: scenario
@@ -100,7 +110,7 @@ SCENARIOS: Mapping[str, Scenario] = MappingProxyType(
                 Scenario(
                     name=name,
                     description=f"real building: {what}",
-                    build=lambda variant, name=name: build_real(name),
+                    build=_real_builder(name),
                 )
                 for name, what in REAL_BUILDINGS.items()
             ),
