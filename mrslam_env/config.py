@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass, field, fields
 
 from mrslam_env.slam.config import SlamConfig
-from mrslam_env.validation import require
+from mrslam_env.validation import check_fields, require
 
 __all__ = [
     "CommConfig",
@@ -25,34 +25,11 @@ __all__ = [
 ]
 
 
-def _check(
-    cls_name: str,
-    name: str,
-    value: float,
-    *,
-    low: float = -math.inf,
-    high: float = math.inf,
-    low_open: bool = False,
-) -> None:
-    ok = math.isfinite(value) and (value > low if low_open else value >= low) and value <= high
-    bound = f"{'>' if low_open else '>='} {low}" + (f" and <= {high}" if high < math.inf else "")
-    require(cls_name, name, value, ok, bound)
-
-
-def _check_all(
-    obj: object,
-    *,
-    positive: tuple[str, ...] = (),
-    non_negative: tuple[str, ...] = (),
-    probability: tuple[str, ...] = (),
-) -> None:
-    name = type(obj).__name__
-    for f in positive:
-        _check(name, f, getattr(obj, f), low=0.0, low_open=True)
-    for f in non_negative:
-        _check(name, f, getattr(obj, f), low=0.0)
-    for f in probability:
-        _check(name, f, getattr(obj, f), low=0.0, high=1.0)
+def _require_probability(config: object, name: str) -> None:
+    """A field that is a probability: a number in [0, 1]."""
+    value = getattr(config, name)
+    ok = isinstance(value, int | float) and 0.0 <= value <= 1.0
+    require(type(config).__name__, name, value, ok, "a number in [0, 1]")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -73,7 +50,7 @@ class RobotConfig:
     """Limit on the change of the commanded angular speed, rad/s^2."""
 
     def __post_init__(self) -> None:
-        _check_all(self, positive=tuple(f.name for f in fields(self)))
+        check_fields(self, positive=tuple(f.name for f in fields(self)))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -90,14 +67,11 @@ class LidarConfig:
     """Probability that a beam returns nothing (reported as ``max_range``)."""
 
     def __post_init__(self) -> None:
-        if not isinstance(self.n_beams, int) or self.n_beams < 4:
-            raise ValueError(f"LidarConfig.n_beams must be an int >= 4, got {self.n_beams!r}")
-        _check_all(
-            self,
-            positive=("max_range",),
-            non_negative=("range_noise_std",),
-            probability=("dropout_probability",),
-        )
+        n_beams = self.n_beams
+        ok = isinstance(n_beams, int) and not isinstance(n_beams, bool) and n_beams >= 4
+        require("LidarConfig", "n_beams", n_beams, ok, "an int >= 4")
+        check_fields(self, positive=("max_range",), non_negative=("range_noise_std",))
+        _require_probability(self, "dropout_probability")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -116,7 +90,7 @@ class OdometryConfig:
     """Translation variance per squared rotation, m^2/rad^2."""
 
     def __post_init__(self) -> None:
-        _check_all(self, non_negative=("alpha1", "alpha2", "alpha3", "alpha4"))
+        check_fields(self, non_negative=("alpha1", "alpha2", "alpha3", "alpha4"))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -133,7 +107,7 @@ class PeerSensorConfig:
     """rad."""
 
     def __post_init__(self) -> None:
-        _check_all(
+        check_fields(
             self,
             positive=("detect_range",),
             non_negative=("range_noise_std", "bearing_noise_std", "heading_noise_std"),
@@ -152,7 +126,8 @@ class CommConfig:
     """Probability that an otherwise-up link is down on a given step."""
 
     def __post_init__(self) -> None:
-        _check_all(self, positive=("comm_range",), probability=("packet_loss",))
+        check_fields(self, positive=("comm_range",))
+        _require_probability(self, "packet_loss")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -169,7 +144,7 @@ class RewardConfig:
     ``observable_area``)."""
 
     def __post_init__(self) -> None:
-        _check_all(
+        check_fields(
             self,
             non_negative=("area_weight", "collision_penalty"),
             positive=("coverage_resolution",),
@@ -187,9 +162,7 @@ class LocalMapConfig:
     """Edge of one crop cell, m (the default crop spans 6.4 m)."""
 
     def __post_init__(self) -> None:
-        if not isinstance(self.cells, int) or isinstance(self.cells, bool) or self.cells < 1:
-            raise ValueError(f"LocalMapConfig.cells must be an int >= 1, got {self.cells!r}")
-        _check_all(self, positive=("cell_size",))
+        check_fields(self, positive=("cell_size",), counts=("cells",))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -220,16 +193,9 @@ class EnvConfig:
     automatic starts."""
 
     def __post_init__(self) -> None:
-        _check_all(self, positive=("dt",))
-        for name in ("physics_substeps", "max_cycles"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or value < 1:
-                raise ValueError(f"EnvConfig.{name} must be an int >= 1, got {value!r}")
+        check_fields(self, positive=("dt",), counts=("physics_substeps", "max_cycles"))
         if self.starts is not None:
-            if len(self.starts) == 0:
-                raise ValueError("EnvConfig.starts must hold at least one pose, or be None")
+            require("EnvConfig", "starts", self.starts, len(self.starts) > 0, "None or non-empty")
             for i, start in enumerate(self.starts):
-                if len(start) != 3 or not all(math.isfinite(v) for v in start):
-                    raise ValueError(
-                        f"EnvConfig.starts[{i}] must be finite (x, y, theta), got {start!r}"
-                    )
+                ok = len(start) == 3 and all(math.isfinite(v) for v in start)
+                require("EnvConfig", f"starts[{i}]", start, ok, "a finite (x, y, theta)")

@@ -1,5 +1,6 @@
 """Scores against ground truth: SLAM trajectory error and map agreement, the error of a
-merge transform, and the true overlap and agreement of two maps.
+merge transform, the true overlap and agreement of two maps, and how much of the world
+maps cover. Evaluation only: nothing here is known to the robots.
 
 The SLAM scores compare a result in the robot's *map* frame with the ground truth in the *world*
 frame, through ``world_from_map``: for onboard SLAM that is the robot's true start pose
@@ -14,17 +15,19 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
-from mrslam_env.geometry import compose, wrap_scalar
+from mrslam_env.geometry import compose, inverse, transform_points, wrap_scalar
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap, grid_footprint, resample_cells
+from mrslam_env.sim.world import WorldSpec, ground_truth_map
 
 FloatArray = NDArray[np.float64]
 
 __all__ = [
+    "CoverageEvaluator",
     "absolute_trajectory_error",
     "cell_agreement",
     "map_agreement",
     "overlap_of_masks",
-    "pose_errors",
+    "relative_transform_error",
     "true_overlap",
 ]
 
@@ -110,13 +113,27 @@ def map_agreement(estimate: GridMap, world_from_map: ArrayLike, ground_truth: Gr
     return float(np.mean(agree))
 
 
-def pose_errors(estimate: FloatArray, truth: FloatArray) -> tuple[float, float]:
-    """Translation error (m) and absolute rotation error (degrees, wrapped) of a transform."""
+def relative_transform_error(
+    estimate: ArrayLike, truth: ArrayLike, pivot: ArrayLike | None = None
+) -> tuple[float, float]:
+    """Translation error (m) and absolute rotation error (rad, wrapped to [0, pi]) of a
+    transform ``estimate`` against ``truth`` (both ``map1_from_map2``).
+
+    The translation error is the distance between the two images of ``pivot``, a point of
+    map 2 (default the origin of its frame: then it is the distance between the two
+    translations), i.e. how far ``inverse(truth) ∘ estimate`` moves the pivot; the rotation
+    error is the wrapped difference of the two angles. Measured at a point of the map (its
+    known centroid, say), the translation error does not grow with the map's distance from
+    its frame's origin.
+    """
     e = np.asarray(estimate, dtype=np.float64)
     t = np.asarray(truth, dtype=np.float64)
-    translation = math.hypot(e[0] - t[0], e[1] - t[1])
-    rotation = abs(wrap_scalar(float(e[2] - t[2])))
-    return translation, math.degrees(rotation)
+    if pivot is None:
+        dx, dy = e[0] - t[0], e[1] - t[1]
+    else:
+        point = np.asarray(pivot, dtype=np.float64).reshape(1, 2)
+        dx, dy = transform_points(e, point)[0] - transform_points(t, point)[0]
+    return math.hypot(dx, dy), abs(wrap_scalar(float(e[2] - t[2])))
 
 
 def true_overlap(m1: GridMap, m2: GridMap, map1_from_map2: FloatArray) -> float:
@@ -156,3 +173,49 @@ def cell_agreement(m1: GridMap, m2: GridMap, map1_from_map2: FloatArray) -> floa
     warped = resample_cells(m2, transform, m1.origin, m1.shape, m1.resolution)
     both = (warped != UNKNOWN) & (m1.cells != UNKNOWN)
     return float(np.mean(warped[both] == m1.cells[both])) if both.any() else math.nan
+
+
+class CoverageEvaluator:
+    """How much of the free area maps cover, judged against the ground truth.
+
+    The evaluation points are the free cells of a ground-truth raster of the world that
+    the robots could ever reach from ``starts``
+    (:func:`mrslam_env.env.observable_cells`), as world points; a map covers a point when
+    the cell under it is known (FREE or OCCUPIED) once the map is put in the world by its
+    true frame.
+
+    Parameters
+    ----------
+    world : WorldSpec
+    starts : ndarray, shape (n, 3)
+        The robots' true start poses, world frame.
+    resolution : float
+        Cell size of the raster, m.
+    """
+
+    def __init__(self, world: WorldSpec, starts: FloatArray, resolution: float = 0.1) -> None:
+        # Imported here: the env module brings PettingZoo and pymunk, which scoring a map
+        # does not otherwise need.
+        from mrslam_env.env import observable_cells
+
+        raster = ground_truth_map(world, resolution, margin=1.0)
+        free = observable_cells(raster, np.asarray(starts, dtype=np.float64)) & raster.free
+        self.points = raster.cell_to_world(np.argwhere(free))
+
+    def known(self, grid: GridMap, world_from_map: ArrayLike) -> NDArray[np.bool_]:
+        """Which evaluation points ``grid`` knows, (P,) bool."""
+        cells = grid.world_to_cell(transform_points(inverse(world_from_map), self.points))
+        inside = grid.contains(cells)
+        known = np.zeros(len(self.points), dtype=bool)
+        known[inside] = grid.cells[cells[inside, 0], cells[inside, 1]] != UNKNOWN
+        return known
+
+    def coverage(self, grids: list[GridMap], world_from_maps: list[FloatArray]) -> float:
+        """Fraction of the free area known in any of the maps (each given with its true
+        frame in the world), in [0, 1]; 0 when the world has no reachable free cell."""
+        if len(self.points) == 0:
+            return 0.0
+        known = np.zeros(len(self.points), dtype=bool)
+        for grid, frame in zip(grids, world_from_maps, strict=True):
+            known |= self.known(grid, frame)
+        return float(known.mean())

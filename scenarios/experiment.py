@@ -30,10 +30,15 @@ from numpy.typing import NDArray
 
 from agents.team import TeamConfig, TeamCoordinator, TeamState
 from mrslam_env.config import CommConfig, EnvConfig
-from mrslam_env.env import MultiRobotSlamEnv, observable_cells
-from mrslam_env.evaluation import map_agreement
-from mrslam_env.geometry import compose, inverse, transform_points, wrap_scalar
-from mrslam_env.gridmap import UNKNOWN, GridMap
+from mrslam_env.env import MultiRobotSlamEnv
+from mrslam_env.evaluation import (
+    CoverageEvaluator,
+    absolute_trajectory_error,
+    map_agreement,
+    relative_transform_error,
+)
+from mrslam_env.geometry import compose, inverse, transform_points
+from mrslam_env.gridmap import GridMap
 from mrslam_env.mapio import load_map, save_map
 from mrslam_env.merge.fuse import fuse_maps, resample_map
 from mrslam_env.recording import Recorder
@@ -42,7 +47,7 @@ from mrslam_env.sim.mapworld import world_from_map
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
 from scenarios.figure import summary_figure
 
-__all__ = ["CoverageEvaluator", "RunConfig", "resolve_world", "run_experiment"]
+__all__ = ["RunConfig", "resolve_world", "run_experiment"]
 
 FloatArray = NDArray[np.float64]
 
@@ -98,37 +103,6 @@ def resolve_world(scenario: str, map_path: Path | None, seed: int = 0) -> WorldS
     return world_from_map(grid, name=f"map:{Path(map_path).name}", rng=np.random.default_rng(seed))
 
 
-class CoverageEvaluator:
-    """How much of the free area maps cover, judged against the ground truth.
-
-    Evaluation only (privileged): the free cells of a ground-truth raster that the robots
-    could ever reach, as world points; a map covers a point when the cell under it is
-    known (FREE or OCCUPIED) once the map is put in the world by its true frame.
-    """
-
-    def __init__(self, world: WorldSpec, starts: FloatArray, resolution: float = 0.1) -> None:
-        raster = ground_truth_map(world, resolution, margin=1.0)
-        free = observable_cells(raster, starts) & raster.free
-        self.points = raster.cell_to_world(np.argwhere(free))
-
-    def known(self, grid: GridMap, world_from_map: FloatArray) -> NDArray[np.bool_]:
-        """Which evaluation points ``grid`` knows, (P,) bool."""
-        cells = grid.world_to_cell(transform_points(inverse(world_from_map), self.points))
-        inside = grid.contains(cells)
-        known = np.zeros(len(self.points), dtype=bool)
-        known[inside] = grid.cells[cells[inside, 0], cells[inside, 1]] != UNKNOWN
-        return known
-
-    def coverage(self, grids: list[GridMap], world_from_maps: list[FloatArray]) -> float:
-        """Fraction of the free area known in any of the maps."""
-        if len(self.points) == 0:
-            return 0.0
-        known = np.zeros(len(self.points), dtype=bool)
-        for grid, frame in zip(grids, world_from_maps, strict=True):
-            known |= self.known(grid, frame)
-        return float(known.mean())
-
-
 class _MapCache:
     """Each robot's own map, rebuilt only when its SLAM integrated a new scan."""
 
@@ -147,21 +121,29 @@ class _MapCache:
         return cached[1]
 
 
+def build_team(config: RunConfig, env_config: EnvConfig) -> TeamCoordinator:
+    """The run's team, planning for the env's robots and sensors (``env_config`` is the
+    env's own config: its robot radius, speeds, control period and peer sensor range)."""
+    team_config = TeamConfig.for_env(env_config, interaction=config.interaction)
+    return TeamCoordinator.for_env(
+        env_config, rng=np.random.default_rng(config.seed), config=team_config
+    )
+
+
 @contextmanager
 def _progress(total: int, enabled: bool) -> Iterator[Any]:
+    """A step counter to ``total``; a run that finishes early (coverage reached, nothing
+    left to explore) ends the bar at 100 % of the steps it took."""
     from tqdm import tqdm
 
     bar = tqdm(total=total, disable=not enabled, unit="step", desc="mrslam run", leave=False)
     try:
         yield bar
+        if not bar.disable and bar.n < bar.total:
+            bar.total = bar.n
+            bar.refresh()
     finally:
         bar.close()
-
-
-def _squared_error(world_from_map: FloatArray, pose_in_map: FloatArray, true_pose: Any) -> float:
-    """Squared position error (m²) of a SLAM pose against the truth."""
-    estimate = transform_points(world_from_map, pose_in_map[None, :2])[0]
-    return float(np.sum((estimate - np.asarray(true_pose)[:2]) ** 2))
 
 
 def _pose_dict(pose: FloatArray) -> dict[str, float]:
@@ -183,9 +165,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
     env = MultiRobotSlamEnv(scenario=world, seed=config.seed, config=env_config)
     observations, infos = env.reset()
     agents = list(env.possible_agents)
-    team = TeamCoordinator(
-        TeamConfig(interaction=config.interaction), rng=np.random.default_rng(config.seed)
-    )
+    team = build_team(config, env.config)
     maps = _MapCache(env)
     # Robot i's map frame is its start pose: how its SLAM and the merge are judged.
     world_from_maps = [env.simulator.starts[i].copy() for i in range(len(agents))]
@@ -202,12 +182,13 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
             f"run {name}: world {world.name}, {len(agents)} robots, seed {config.seed}"
         )
         recorder.log_text("team/state", str(team.state))
-    squared_errors = np.array(
-        [
-            _squared_error(world_from_maps[i], observations[a]["pose"], infos[a]["true_pose"])
-            for i, a in enumerate(agents)
-        ]
-    )
+    # Each robot's SLAM poses (map frame) and true poses (world), every step, for its ATE.
+    slam_poses: list[list[FloatArray]] = [[observations[a]["pose"]] for a in agents]
+    true_poses: list[list[FloatArray]] = [[infos[a]["true_pose"]] for a in agents]
+
+    def ate(i: int) -> float:
+        return absolute_trajectory_error(slam_poses[i], true_poses[i], world_from_maps[i])
+
     logged_scans = [-1] * len(agents)
     collisions = dict.fromkeys(agents, 0)
     state = team.state
@@ -225,9 +206,8 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
             bar.update(1)
             for i, agent in enumerate(agents):
                 collisions[agent] += infos[agent]["collision"]
-                squared_errors[i] += _squared_error(
-                    world_from_maps[i], observations[agent]["pose"], infos[agent]["true_pose"]
-                )
+                slam_poses[i].append(observations[agent]["pose"])
+                true_poses[i].append(infos[agent]["true_pose"])
             if recorder is not None:
                 recorder.set_time(steps, steps * env_config.dt)
                 for decision in team.pop_decisions():
@@ -239,8 +219,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                 _record_step(recorder, env, team, maps, observations, infos, config, logged_scans)
                 if recorder.map_due:
                     for i, agent in enumerate(agents):
-                        ate = float(np.sqrt(squared_errors[i] / (steps + 1)))
-                        recorder.log_scalar(f"ate/{agent}", ate)
+                        recorder.log_scalar(f"ate/{agent}", ate(i))
             else:
                 team.pop_decisions()
             state = team.state
@@ -282,12 +261,12 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
         merged = fuse_maps(own_maps[0], other, team.transform)
         assert team.preliminary_transform is not None
         preliminary = fuse_maps(own_maps[0], other, team.preliminary_transform)
-        error = compose(inverse(true_transform), team.transform)
+        translation_error, rotation_error = relative_transform_error(team.transform, true_transform)
         merge_report.update(
             transform=_pose_dict(team.transform),
             preliminary_transform=_pose_dict(team.preliminary_transform),
-            translation_error=round(float(np.hypot(error[0], error[1])), 4),
-            rotation_error=round(math.degrees(abs(wrap_scalar(float(error[2])))), 4),
+            translation_error=round(translation_error, 4),
+            rotation_error=round(math.degrees(rotation_error), 4),
         )
         save_map(run_dir / "merged.yaml", merged)
         outputs["merged_map"] = str(run_dir / "merged.yaml")
@@ -323,7 +302,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
         "coverage_curve": [[s, round(c, 4)] for s, c in coverage_curve],
         "slam": {
             agent: {
-                "ate": round(float(np.sqrt(squared_errors[i] / (steps + 1))), 4),
+                "ate": round(ate(i), 4),
                 "map_agreement": round(map_agreement(own_maps[i], world_from_maps[i], truth), 4),
             }
             for i, agent in enumerate(agents)

@@ -8,13 +8,12 @@ from scipy import ndimage
 
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.sim.mapworld import (
-    START_CLEARANCE_MARGIN,
-    _lower_bound_clearance,
     cover_rectangles,
     outline_segments,
     wall_mask,
     world_from_map,
 )
+from mrslam_env.sim.starts import START_MARGIN
 from mrslam_env.sim.world import ground_truth_map
 
 FR, OC, UN = FREE, OCCUPIED, UNKNOWN
@@ -61,6 +60,11 @@ def split_into_unit_edges(segments: np.ndarray) -> list[tuple[int, int, int, int
             (x0 + k * dx, y0 + k * dy, x0 + (k + 1) * dx, y0 + (k + 1) * dy) for k in range(length)
         ]
     return edges
+
+
+def slack(grid: GridMap) -> float:
+    """How far the start clearance estimate may exceed the exact clearance, m."""
+    return (np.sqrt(0.5) - 0.5) * grid.resolution
 
 
 def rooms_grid(rows: int = 60, cols: int = 80, origin: tuple[float, float] = (-2.0, 1.0)):
@@ -231,7 +235,7 @@ def test_auto_starts_are_free_far_apart_with_clearance() -> None:
     cells = grid.world_to_cell(starts[:, :2])
     assert grid.contains(cells).all()
     assert (grid.cells[cells[:, 0], cells[:, 1]] == FR).all()
-    assert np.all(world.clearance(starts[:, :2]) >= radius + START_CLEARANCE_MARGIN - 1e-9)
+    assert np.all(world.clearance(starts[:, :2]) >= radius + START_MARGIN - slack(grid) - 1e-9)
     assert abs(starts[0, 2] - starts[1, 2]) > 1.0  # different headings
     assert np.all((starts[:, 2] > -np.pi) & (starts[:, 2] <= np.pi))
     # Far apart: at least half the diagonal of the map.
@@ -312,22 +316,16 @@ def test_map_too_narrow_for_starts_raises() -> None:
         world_from_map(grid, name="narrow")
 
 
-def test_clearance_bound_is_conservative_and_tight() -> None:
-    # The distance-transform bound used for automatic starts, against exact clearance.
+def test_auto_starts_keep_the_start_clearance_among_pillars() -> None:
+    # The start clearance rule (mrslam_env.sim.starts), against exact clearance.
     rng = np.random.default_rng(5)
     cells = np.where(rng.random((40, 40)) < 0.01, OC, FR).astype(np.int8)
     cells = np.where(ndimage.binary_dilation(cells == OC), OC, FR).astype(np.int8)
     grid = GridMap(cells=cells, resolution=0.05, origin=(0.3, -0.7))
     world = world_from_map(grid, name="pillars", robot_radius=0.05)
-    walls = np.pad(wall_mask(grid), 1, constant_values=True)
-    bound = _lower_bound_clearance(walls, grid.resolution)[1:-1, 1:-1]
-    free_cells = np.argwhere(grid.cells == FR)
-    exact = world.clearance(grid.cell_to_world(free_cells))
-    lower = bound[free_cells[:, 0], free_cells[:, 1]]
-    assert np.all(lower <= exact + 1e-9)
-    assert np.all(lower >= exact - np.sqrt(0.5) * grid.resolution - 1e-9)
     for seed in range(3):
         starts = world_from_map(
             grid, name="pillars", n_starts=4, robot_radius=0.1, rng=np.random.default_rng(seed)
         ).starts
-        assert np.all(world.clearance(starts[:, :2]) >= 0.1 + START_CLEARANCE_MARGIN - 1e-9)
+        clearance = world.clearance(starts[:, :2])
+        assert np.all(clearance >= 0.1 + START_MARGIN - slack(grid) - 1e-9)

@@ -2,8 +2,9 @@
 
 - :func:`resample_map` changes a grid's resolution (down-sampling keeps the most
   conservative class of each block: occupied over free over unknown).
-- :func:`warp_map` expresses map 2 in map 1's frame by inverse nearest-neighbour mapping:
-  every output cell takes the class of the map-2 cell under its centre.
+- :func:`warp_map` expresses map 2 in map 1's frame by inverse nearest-neighbour mapping
+  (:func:`mrslam_env.gridmap.resample_cells`): every output cell takes the class of the
+  map-2 cell under its centre.
 - :func:`fuse_maps` lays m1 and the warped m2 on one grid on m1's lattice, grown to cover
   both, with the rule *known beats unknown; where both are known and disagree, occupied
   wins*. Occupied-wins is the conservative choice for a robot that plans on the merged map:
@@ -15,12 +16,11 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mrslam_env.geometry import inverse, transform_points
-from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
+from mrslam_env.geometry import transform_points
+from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap, resample_cells
 from mrslam_env.merge.dissimilarity import check_same_resolution, check_transform
 
 __all__ = ["covering_grid", "fuse_cells", "fuse_maps", "resample_map", "warp_map"]
@@ -137,40 +137,6 @@ def _upsample(
     return out
 
 
-@numba.njit(cache=True)
-def _warp_kernel(
-    source: NDArray[np.int8],
-    source_x: float,
-    source_y: float,
-    source_resolution: float,
-    rows: int,
-    cols: int,
-    origin_x: float,
-    origin_y: float,
-    resolution: float,
-    tx: float,
-    ty: float,
-    cos_t: float,
-    sin_t: float,
-) -> NDArray[np.int8]:
-    """Inverse nearest-neighbour mapping: each output cell centre is taken by
-    ``(tx, ty, theta)`` = source_from_output into the source grid, whose cell under it
-    gives the class (UNKNOWN outside)."""
-    source_rows, source_cols = source.shape
-    out = np.full((rows, cols), UNKNOWN, dtype=np.int8)
-    for row in range(rows):
-        y = origin_y + (row + 0.5) * resolution
-        for col in range(cols):
-            x = origin_x + (col + 0.5) * resolution
-            sx = cos_t * x - sin_t * y + tx
-            sy = sin_t * x + cos_t * y + ty
-            source_col = math.floor((sx - source_x) / source_resolution)
-            source_row = math.floor((sy - source_y) / source_resolution)
-            if 0 <= source_row < source_rows and 0 <= source_col < source_cols:
-                out[row, col] = source[source_row, source_col]
-    return out
-
-
 def _image_bounds(m2: GridMap, map1_from_map2: NDArray[np.float64]) -> NDArray[np.float64]:
     """``(xmin, ymin, xmax, ymax)`` in map 1's frame of m2's extent's four corners."""
     x0, y0, x1, y1 = m2.extent
@@ -222,8 +188,9 @@ def warp_map(m2: GridMap, map1_from_map2: ArrayLike, *, like: GridMap | None = N
     """m2 expressed in map 1's frame by inverse nearest-neighbour mapping.
 
     Each output cell takes the class of the m2 cell under the pre-image of its centre
-    (UNKNOWN outside m2). Lattice-exact transforms (quarter turns, whole-cell shifts) are
-    reproduced exactly.
+    (UNKNOWN outside m2), by :func:`mrslam_env.gridmap.resample_cells` onto the output
+    lattice. Lattice-exact transforms (quarter turns, whole-cell shifts) are reproduced
+    exactly.
 
     Parameters
     ----------
@@ -256,22 +223,7 @@ def warp_map(m2: GridMap, map1_from_map2: ArrayLike, *, like: GridMap | None = N
     else:
         _check_not_empty(like, "like")
         check_same_resolution(like, m2)
-    map2_from_map1 = inverse(transform)
-    out = _warp_kernel(
-        m2.cells,
-        float(m2.origin[0]),
-        float(m2.origin[1]),
-        m2.resolution,
-        like.shape[0],
-        like.shape[1],
-        float(like.origin[0]),
-        float(like.origin[1]),
-        like.resolution,
-        float(map2_from_map1[0]),
-        float(map2_from_map1[1]),
-        math.cos(float(map2_from_map1[2])),
-        math.sin(float(map2_from_map1[2])),
-    )
+    out = resample_cells(m2, transform, like.origin, like.shape, like.resolution)
     return GridMap(cells=out, resolution=like.resolution, origin=like.origin)
 
 

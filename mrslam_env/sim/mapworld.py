@@ -12,8 +12,9 @@
 * **Lidar segments** are the traced outline of the same union of cells: the cell edges
   between wall and non-wall cells merged into maximal straight runs
   (:func:`outline_segments`). Interior edges between rectangles are not in it.
-* **Starts** are chosen automatically in the largest connected free region, far apart and
-  with clearance from the walls, unless given (then they are checked).
+* **Starts** are chosen automatically by the start clearance rule
+  (:mod:`mrslam_env.sim.starts`) in the largest region where the robot fits, far apart,
+  unless given (then they are checked).
 
 Everything is vectorised numpy: a 1000 x 1000 map builds in a fraction of a second (see
 :func:`_bench_world_from_map`).
@@ -26,14 +27,13 @@ import time
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import ndimage
 
 from mrslam_env.geometry import wrap_angle
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
+from mrslam_env.sim.starts import START_MARGIN, start_cells
 from mrslam_env.sim.world import WorldSpec
 
 __all__ = [
-    "START_CLEARANCE_MARGIN",
     "cover_rectangles",
     "outline_segments",
     "wall_mask",
@@ -44,7 +44,6 @@ IntArray = NDArray[np.int64]
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
-START_CLEARANCE_MARGIN = 0.15  # m beyond the robot radius for automatic starts
 _START_SAMPLE = 512  # candidate cells compared pairwise when choosing far-apart starts
 
 
@@ -189,17 +188,6 @@ def _rectangles_to_quads(rectangles: IntArray, origin: FloatArray, resolution: f
     )
 
 
-def _lower_bound_clearance(walls: BoolArray, resolution: float) -> FloatArray:
-    """Lower bound (m) on the distance from each cell centre to the nearest wall cell.
-
-    The Euclidean distance transform gives centre-to-centre distances; subtracting half a
-    cell diagonal bounds the distance to the wall cell's square from below. Wall cells
-    get negative values.
-    """
-    centre_distance = ndimage.distance_transform_edt(~walls)
-    return (np.asarray(centre_distance, dtype=np.float64) - math.sqrt(0.5)) * resolution
-
-
 def _choose_starts(
     walls: BoolArray,
     free: BoolArray,
@@ -211,11 +199,11 @@ def _choose_starts(
 ) -> FloatArray:
     """Pick ``n_starts`` far-apart poses in free cells with clearance.
 
-    The cells where a robot of ``robot_radius`` fits are labelled (4-connectivity) and the
-    largest region is kept, so every start can reach every other. Among its FREE cells
-    with clearance >= ``robot_radius + START_CLEARANCE_MARGIN``, a random sample is taken;
-    the two farthest apart are chosen, then greedily the cell farthest from those chosen.
-    Headings are evenly spread from a random first one.
+    Candidates are the FREE cells among the :func:`~mrslam_env.sim.starts.start_cells`
+    of the wall mask (the start clearance rule, in the largest region where a robot of
+    ``robot_radius`` fits, so every start can reach every other). Of a random sample of
+    them, the two farthest apart are chosen, then greedily the cell farthest from those
+    chosen. Headings are evenly spread from a random first one.
 
     Returns
     -------
@@ -224,22 +212,12 @@ def _choose_starts(
     """
     if not free.any():
         raise ValueError("map has no free space: no FREE cell to start a robot in")
-    clearance = _lower_bound_clearance(walls, resolution)
-    fits = ~walls & (clearance >= robot_radius)
-    labels, count = ndimage.label(fits)
-    if count == 0:
-        raise ValueError(
-            f"map has no free space wide enough for a robot of radius {robot_radius} m"
-        )
-    sizes = np.bincount(labels.ravel())
-    sizes[0] = 0
-    region = labels == int(np.argmax(sizes))
-    required = robot_radius + START_CLEARANCE_MARGIN
-    candidates = np.flatnonzero(region & free & (clearance >= required))
+    candidates = np.flatnonzero(start_cells(walls, resolution, robot_radius) & free)
     if len(candidates) < n_starts:
         raise ValueError(
-            f"map has room for only {len(candidates)} of {n_starts} starts with "
-            f"clearance >= {required:.3f} m in its largest free region"
+            f"map has room for only {len(candidates)} of {n_starts} starts for a robot of "
+            f"radius {robot_radius} m (clearance >= radius + {START_MARGIN} m) in its "
+            "largest free region"
         )
     if len(candidates) > _START_SAMPLE:
         candidates = np.sort(rng.choice(candidates, size=_START_SAMPLE, replace=False))
@@ -363,11 +341,11 @@ def world_from_map(
 
     Notes
     -----
-    Automatic starts lie at FREE cell centres with clearance at least
-    ``robot_radius + START_CLEARANCE_MARGIN`` (a lower bound from the Euclidean distance
-    transform), inside the largest 4-connected region of cells where the robot fits, as
-    far apart as a random sample of 512 candidate cells allows, with headings spread
-    evenly around the circle. They are deterministic given ``rng``.
+    Automatic starts lie at the centres of FREE cells where the robot can start by the
+    start clearance rule (:mod:`mrslam_env.sim.starts`: clearance estimate at least
+    ``robot_radius + START_MARGIN``, inside the largest 4-connected region of cells where
+    the robot fits), as far apart as a random sample of 512 candidate cells allows, with
+    headings spread evenly around the circle. They are deterministic given ``rng``.
     """
     if not name:
         raise ValueError("name must be a non-empty string")

@@ -12,7 +12,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from mrslam_env.config import EnvConfig
 from mrslam_env.sim.lidar import beam_angles, cast_scan, line_of_sight
@@ -24,7 +23,8 @@ from mrslam_env.sim.sensors import (
     peer_measurements,
     sample_odometry_increments,
 )
-from mrslam_env.sim.world import WorldSpec, ground_truth_map
+from mrslam_env.sim.starts import world_start_points
+from mrslam_env.sim.world import WorldSpec
 
 FloatArray = NDArray[np.float64]
 
@@ -71,9 +71,10 @@ def choose_starts(
 ) -> FloatArray:
     """Start poses (n, 3): the given ones (validated), then automatic ones.
 
-    Automatic starts lie where the robot fits, connected (for the robot, not just
-    through free cells) to the first start, with at least ``radius + 0.3`` m clearance, at
-    least 2 m from other robots, any heading.
+    Automatic starts are drawn in random order from the cells where the robot can start
+    reachable from the first start (the start clearance rule,
+    :func:`mrslam_env.sim.starts.world_start_points`), each at least 2 m from the other
+    robots, with a uniformly random heading.
 
     Raises
     ------
@@ -98,20 +99,12 @@ def choose_starts(
                     f"({starts[j][0]:.2f}, {starts[j][1]:.2f})"
                 )
     if len(starts) < n_robots:
-        resolution = 0.1
-        grid = ground_truth_map(world, resolution, margin=resolution)
-        # Cell-centre distance to the nearest occupied cell centre, less half a cell: a
-        # lower bound of the true clearance. Regions are linked only where the robot fits.
-        distance = (ndimage.distance_transform_edt(grid.free) - 0.5) * resolution
-        labels, _ = ndimage.label(distance >= radius)
-        iy, ix = grid.world_to_cell(starts[0][:2])
-        component = labels == labels[iy, ix]
-        candidates = np.argwhere(component & (distance >= radius + 0.3))
+        candidates = world_start_points(world, radius, starts[0][:2])
         order = rng.permutation(len(candidates))
         for index in order:
             if len(starts) == n_robots:
                 break
-            xy = grid.cell_to_world(candidates[index])
+            xy = candidates[index]
             if all(math.hypot(*(xy - s[:2])) >= 2.0 for s in starts):
                 starts.append(np.array([xy[0], xy[1], rng.uniform(-math.pi, math.pi)]))
         if len(starts) < n_robots:

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
+from mrslam_env.validation import require
 
 FloatArray = NDArray[np.float64]
 
@@ -123,15 +124,18 @@ class WorldSpec:
     description: str = ""
 
     def __post_init__(self) -> None:
+        owner = "WorldSpec"
         walls = np.asarray(self.walls, dtype=np.float64)
-        if walls.ndim != 3 or walls.shape[1:] != (4, 2) or len(walls) == 0:
-            raise ValueError(f"WorldSpec.walls must have shape (K>0, 4, 2), got {walls.shape}")
-        if not np.all(np.isfinite(walls)):
-            raise ValueError("WorldSpec.walls holds non-finite coordinates")
+        ok = walls.ndim == 3 and walls.shape[1:] == (4, 2) and len(walls) > 0
+        require(owner, "walls", walls.shape, ok, "an array of shape (K>0, 4, 2)")
+        finite = np.isfinite(walls).all(axis=(1, 2))
+        if not finite.all():
+            bad = walls[int(np.argmin(finite))].tolist()
+            require(owner, "walls", bad, False, "free of non-finite coordinates")
         walls = _ccw_convex(walls)
         starts = np.asarray(self.starts, dtype=np.float64).reshape(-1, 3)
-        if len(starts) == 0 or not np.all(np.isfinite(starts)):
-            raise ValueError("WorldSpec.starts must hold at least one finite (x, y, theta)")
+        ok = len(starts) > 0 and bool(np.all(np.isfinite(starts)))
+        require(owner, "starts", starts.tolist(), ok, "one or more finite (x, y, theta) poses")
         segments = np.asarray(self.segments, dtype=np.float64).reshape(-1, 4)
         if len(segments) == 0:
             segments = polygon_edges(walls)
@@ -139,8 +143,8 @@ class WorldSpec:
         if bounds == (0.0, 0.0, 0.0, 0.0):
             lo, hi = walls.reshape(-1, 2).min(axis=0), walls.reshape(-1, 2).max(axis=0)
             bounds = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
-        if not (bounds[2] > bounds[0] and bounds[3] > bounds[1]):
-            raise ValueError(f"WorldSpec.bounds is empty: {bounds}")
+        ok = bounds[2] > bounds[0] and bounds[3] > bounds[1]
+        require(owner, "bounds", bounds, ok, "a non-empty (xmin, ymin, xmax, ymax)")
         for name, value in (("walls", walls), ("starts", starts), ("segments", segments)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)

@@ -35,6 +35,7 @@ from mrslam_env.sim.world import (
     box,
     thick_segment,
 )
+from mrslam_env.validation import check_fields, require
 
 __all__ = [
     "FloorPlan",
@@ -95,43 +96,41 @@ class ProceduralConfig:
     """Free space kept between furniture and walls (halls) or openings (rooms)."""
 
     def __post_init__(self) -> None:
-        for name in ("long_side", "short_side", "corridor_width"):
-            low, high = getattr(self, name)
-            if not 0.0 < low <= high:
-                raise ValueError(
-                    f"ProceduralConfig.{name} must be 0 < low <= high, got {low, high}"
-                )
-        for name in ("min_room_side", "max_room_area", "deep_side", "door_width", "wall_thickness"):
-            if not getattr(self, name) > 0.0:
-                raise ValueError(f"ProceduralConfig.{name} must be > 0, got {getattr(self, name)}")
-        for name in (
+        name = type(self).__name__
+        check_fields(
+            self,
+            positive=(
+                "min_room_side",
+                "max_room_area",
+                "deep_side",
+                "door_width",
+                "wall_thickness",
+            ),
+            non_negative=("furniture_clearance", "door_margin"),
+        )
+        for attr in ("long_side", "short_side", "corridor_width"):
+            low, high = getattr(self, attr)
+            require(name, attr, (low, high), 0.0 < low <= high, "(low, high) with 0 < low <= high")
+        for attr in (
             "stop_probability",
             "hall_probability",
             "side_corridor_probability",
             "parallel_corridor_probability",
         ):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(
-                    f"ProceduralConfig.{name} must be in [0, 1], got {getattr(self, name)}"
-                )
-        if not min(self.desk_size) > 0.0:
-            raise ValueError(f"ProceduralConfig.desk_size must be positive, got {self.desk_size}")
-        if self.furniture_clearance < 0.0:
-            raise ValueError(
-                f"ProceduralConfig.furniture_clearance must be >= 0, got {self.furniture_clearance}"
-            )
-        if self.door_margin < 0.0:
-            raise ValueError(f"ProceduralConfig.door_margin must be >= 0, got {self.door_margin}")
+            value = getattr(self, attr)
+            require(name, attr, value, 0.0 <= value <= 1.0, "in [0, 1]")
+        require(name, "desk_size", self.desk_size, min(self.desk_size) > 0.0, "positive")
         low, high = self.extra_doors
-        if not 0 <= low <= high:
-            raise ValueError(
-                f"ProceduralConfig.extra_doors must be 0 <= low <= high, got {low, high}"
-            )
-        if self.short_side[0] < 2.0 * self.min_room_side + self.corridor_width[1]:
-            raise ValueError(
-                "ProceduralConfig.short_side must leave room for a corridor between two rooms "
-                f"of min_room_side, got {self.short_side}"
-            )
+        require(
+            name, "extra_doors", (low, high), 0 <= low <= high, "(low, high) with 0 <= low <= high"
+        )
+        require(
+            name,
+            "short_side",
+            self.short_side,
+            self.short_side[0] >= 2.0 * self.min_room_side + self.corridor_width[1],
+            "at least two rooms of min_room_side and the widest corridor across",
+        )
 
     @property
     def min_door_wall(self) -> float:

@@ -16,9 +16,9 @@ carry their SLAM's drift (a few centimetres), as real pairs do.
 
 The **overlap** of a pair is computed from the ground truth: both maps' known cells (FREE
 or OCCUPIED) are resampled (nearest cell) onto one raster at the maps' resolution (the
-world frame at generation, map 1's frame in :func:`true_overlap`), and ``overlap =
-|known1 ∧ known2| / min(|known1|, |known2|)``: the share of the smaller map's known area
-that the other map also knows.
+world frame at generation, map 1's frame in :func:`mrslam_env.evaluation.true_overlap`), and
+``overlap = |known1 ∧ known2| / min(|known1|, |known2|)``: the share of the smaller map's
+known area that the other map also knows.
 
 Pairs are chosen to fill overlap bins (default ``[0.2, 0.35)``, ``[0.35, 0.5)``,
 ``[0.5, 0.65)``, ``[0.65, 0.85)``) over the worlds (every built-in scenario and two
@@ -44,7 +44,8 @@ A method whose module is missing is reported as skipped, not as an error.
 Scoring
 -------
 Translation error ``|t_est - t_true|`` (m) and rotation error ``|wrap(theta_est -
-theta_true)|`` (deg). On an overlapping pair: **success** when both are within 0.25 m and
+theta_true)|`` (deg): :func:`mrslam_env.evaluation.relative_transform_error` at map 2's frame
+origin. On an overlapping pair: **success** when both are within 0.25 m and
 2°, **wrong** when a transform is returned outside that tolerance, **refused** when None.
 On a no-overlap pair: **correct refusal** for None, **wrong** for any transform.
 

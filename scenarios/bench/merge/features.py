@@ -49,6 +49,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mrslam_env.gridmap import GridMap
+from mrslam_env.validation import check_fields, require
 
 FloatArray = NDArray[np.float64]
 
@@ -93,25 +94,17 @@ class FeatureMergeConfig:
     """Merge when ``inliers / (8 + 0.3 matches)`` reaches this (``estimation_confidence``)."""
 
     def __post_init__(self) -> None:
-        if self.feature not in FEATURE_TYPES:
-            raise ValueError(
-                f"FeatureMergeConfig.feature must be one of {FEATURE_TYPES}, got {self.feature!r}"
-            )
-        if not 0.0 < self.ratio <= 1.0:
-            raise ValueError(f"FeatureMergeConfig.ratio must be in (0, 1], got {self.ratio!r}")
-        if not isinstance(self.min_matches, int) or self.min_matches < 2:
-            raise ValueError(
-                f"FeatureMergeConfig.min_matches must be an int >= 2, got {self.min_matches!r}"
-            )
-        if not (math.isfinite(self.ransac_threshold) and self.ransac_threshold > 0):
-            raise ValueError(
-                f"FeatureMergeConfig.ransac_threshold must be > 0 px, got {self.ransac_threshold!r}"
-            )
-        if not (math.isfinite(self.confidence_threshold) and self.confidence_threshold >= 0):
-            raise ValueError(
-                "FeatureMergeConfig.confidence_threshold must be >= 0, "
-                f"got {self.confidence_threshold!r}"
-            )
+        name = type(self).__name__
+        feature = self.feature
+        require(name, "feature", feature, feature in FEATURE_TYPES, f"one of {FEATURE_TYPES}")
+        require(name, "ratio", self.ratio, 0.0 < self.ratio <= 1.0, "in (0, 1]")
+        check_fields(
+            self,
+            positive=("ransac_threshold",),
+            non_negative=("confidence_threshold",),
+            counts=("min_matches",),
+        )
+        require(name, "min_matches", self.min_matches, self.min_matches >= 2, "an int >= 2")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True, eq=False)

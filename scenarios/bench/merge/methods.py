@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mrslam_env.gridmap import UNKNOWN, GridMap
+from mrslam_env.validation import check_fields, require
 
 FloatArray = NDArray[np.float64]
 
@@ -59,26 +60,16 @@ class RandomWalkBaselineConfig:
     slides to placements where a sliver of floor overlaps and nothing disagrees."""
 
     def __post_init__(self) -> None:
-        for name in ("starts", "search_iterations"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or value < 1:
-                raise ValueError(
-                    f"RandomWalkBaselineConfig.{name} must be an int >= 1, got {value!r}"
-                )
-        if not 0.0 <= self.min_overlap_fraction < 1.0:
-            raise ValueError(
-                "RandomWalkBaselineConfig.min_overlap_fraction must be in [0, 1), "
-                f"got {self.min_overlap_fraction!r}"
-            )
-        for name in ("search_std_xy", "search_std_theta"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"RandomWalkBaselineConfig.{name} must be > 0, got {value!r}")
-        if not 0.0 < self.acceptance_threshold <= 1.0:
-            raise ValueError(
-                "RandomWalkBaselineConfig.acceptance_threshold must be in (0, 1], "
-                f"got {self.acceptance_threshold!r}"
-            )
+        name = type(self).__name__
+        check_fields(
+            self,
+            positive=("search_std_xy", "search_std_theta"),
+            counts=("starts", "search_iterations"),
+        )
+        fraction = self.min_overlap_fraction
+        require(name, "min_overlap_fraction", fraction, 0.0 <= fraction < 1.0, "in [0, 1)")
+        threshold = self.acceptance_threshold
+        require(name, "acceptance_threshold", threshold, 0.0 < threshold <= 1.0, "in (0, 1]")
 
 
 # --------------------------------------------------------------------------------------

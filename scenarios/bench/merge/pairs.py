@@ -13,7 +13,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from agents.wander import WanderPolicy
 from mrslam_env.config import EnvConfig
@@ -23,9 +22,11 @@ from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import UNKNOWN, GridMap, resample_cells
 from mrslam_env.mapio import load_map, save_map
 from mrslam_env.registry import build_world
+from mrslam_env.sim.starts import world_start_points
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
 from mrslam_env.slam.config import SlamConfig
 from mrslam_env.slam.slam import RobotSlam
+from mrslam_env.validation import check_fields, require
 
 FloatArray = NDArray[np.float64]
 
@@ -65,41 +66,22 @@ class PairGenerationConfig:
     """Maps knowing less than this area (m²) are not used, m²."""
 
     def __post_init__(self) -> None:
-        for name in ("n_pairs", "runs_per_world"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or value < (1 if name == "n_pairs" else 2):
-                low = 1 if name == "n_pairs" else 2
-                raise ValueError(
-                    f"PairGenerationConfig.{name} must be an int >= {low}, got {value!r}"
-                )
-        if not self.worlds:
-            raise ValueError("PairGenerationConfig.worlds must name at least one scenario")
+        name = type(self).__name__
+        check_fields(self, counts=("n_pairs", "runs_per_world"), non_negative=("min_known_area",))
+        runs = self.runs_per_world
+        require(name, "runs_per_world", runs, runs >= 2, "an int >= 2 (pairs combine two runs)")
+        require(name, "worlds", self.worlds, len(self.worlds) > 0, "at least one scenario name")
         steps = self.checkpoints
-        if not steps or any(s < 1 for s in steps) or list(steps) != sorted(set(steps)):
-            raise ValueError(
-                "PairGenerationConfig.checkpoints must be increasing positive step counts, "
-                f"got {steps!r}"
-            )
+        ok = bool(steps) and all(s >= 1 for s in steps) and list(steps) == sorted(set(steps))
+        require(name, "checkpoints", steps, ok, "increasing positive step counts")
         edges = self.overlap_bins
-        if len(edges) < 2 or list(edges) != sorted(set(edges)) or edges[0] <= 0 or edges[-1] > 1:
-            raise ValueError(
-                "PairGenerationConfig.overlap_bins must be >= 2 increasing edges in (0, 1], "
-                f"got {edges!r}"
-            )
-        if not 0.0 <= self.no_overlap_fraction <= 1.0:
-            raise ValueError(
-                "PairGenerationConfig.no_overlap_fraction must be in [0, 1], "
-                f"got {self.no_overlap_fraction!r}"
-            )
-        if not 0.0 < self.no_overlap_max < edges[0]:
-            raise ValueError(
-                "PairGenerationConfig.no_overlap_max must be in (0, overlap_bins[0]), "
-                f"got {self.no_overlap_max!r}"
-            )
-        if not self.min_known_area >= 0:
-            raise ValueError(
-                f"PairGenerationConfig.min_known_area must be >= 0 m², got {self.min_known_area!r}"
-            )
+        ordered = list(edges) == sorted(set(edges))
+        ok = len(edges) >= 2 and ordered and edges[0] > 0 and edges[-1] <= 1
+        require(name, "overlap_bins", edges, ok, ">= 2 increasing edges in (0, 1]")
+        fraction = self.no_overlap_fraction
+        require(name, "no_overlap_fraction", fraction, 0.0 <= fraction <= 1.0, "in [0, 1]")
+        limit = self.no_overlap_max
+        require(name, "no_overlap_max", limit, 0.0 < limit < edges[0], "in (0, overlap_bins[0])")
 
     def cache_key(self) -> str:
         """Folder name of this configuration's cached pairs (the onboard SLAM's defaults are
@@ -127,20 +109,13 @@ def reachable_starts(
 ) -> FloatArray:
     """Random start poses (count, 3) in the free space a robot can reach, any heading.
 
-    Candidates are the cells (0.1 m) with at least ``radius + 0.3`` m clearance, connected
-    for the robot to the world's first start, as the simulator's automatic starts
-    (:func:`mrslam_env.sim.simulator.choose_starts`). The first ``spread`` starts are
+    Candidates are the cells where the robot can start reachable from the world's first
+    start, as for the simulator's automatic starts (the start clearance rule,
+    :func:`mrslam_env.sim.starts.world_start_points`). The first ``spread`` starts are
     spread out by farthest-point sampling from a random first one; the rest are uniform,
     at least ``separation`` m from each other when possible.
     """
-    resolution = 0.1
-    grid = ground_truth_map(world, resolution, margin=resolution)
-    distance = (ndimage.distance_transform_edt(grid.free) - 0.5) * resolution
-    labels, _ = ndimage.label(distance >= radius)
-    iy, ix = grid.world_to_cell(world.starts[0, :2])
-    candidates = grid.cell_to_world(
-        np.argwhere((labels == labels[iy, ix]) & (distance >= radius + 0.3))
-    )
+    candidates = world_start_points(world, radius, world.starts[0, :2])
     if len(candidates) == 0:
         raise ValueError(f"world {world.name!r} has no room for a robot start")
     chosen = [candidates[rng.integers(len(candidates))]]
@@ -199,7 +174,7 @@ def simulate_run(
     lidar = env.config.lidar
     base = slam_config if slam_config is not None else SlamConfig()
     slam = RobotSlam(replace(base, mode="slam"), lidar.n_beams, lidar.max_range)
-    policy = WanderPolicy(lidar.n_beams, np.random.default_rng(seed))
+    policy = WanderPolicy.for_env(env.config, np.random.default_rng(seed))
     agent = env.possible_agents[0]
     world_from_map = np.asarray(infos[agent]["true_pose"], dtype=np.float64).copy()
     slam.update(observations[agent]["odom"], observations[agent]["scan"])

@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mrslam_env.evaluation import cell_agreement, pose_errors
+from mrslam_env.evaluation import cell_agreement, relative_transform_error
+from mrslam_env.validation import check_fields
 from scenarios.bench.merge.methods import MergeMethod
 from scenarios.bench.merge.pairs import MergePair
 
@@ -32,10 +33,7 @@ class Tolerance:
     """Largest rotation error of a success, degrees."""
 
     def __post_init__(self) -> None:
-        for name in ("translation", "rotation_deg"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"Tolerance.{name} must be > 0, got {value!r}")
+        check_fields(self, positive=("translation", "rotation_deg"))
 
 
 def classify_outcome(
@@ -51,8 +49,8 @@ def classify_outcome(
         return "refused" if overlapping else "correct_refusal"
     if not overlapping:
         return "wrong"
-    translation, rotation = pose_errors(estimate, truth)
-    ok = translation <= tolerance.translation and rotation <= tolerance.rotation_deg
+    translation, rotation = relative_transform_error(estimate, truth)
+    ok = translation <= tolerance.translation and math.degrees(rotation) <= tolerance.rotation_deg
     return "success" if ok else "wrong"
 
 
@@ -100,9 +98,10 @@ def run_merge_benchmark(
             except ValueError as failure:  # a method rejecting its input refuses to merge
                 estimate, error = None, str(failure).splitlines()[0]
             seconds = time.perf_counter() - started
-            errors = (
-                (None, None) if estimate is None else pose_errors(estimate, pair.map1_from_map2)
-            )
+            errors: tuple[float | None, float | None] = (None, None)
+            if estimate is not None:
+                translation, rotation = relative_transform_error(estimate, pair.map1_from_map2)
+                errors = (translation, math.degrees(rotation))
             rows.append(
                 {
                     "pair_id": pair.pair_id,

@@ -89,7 +89,7 @@ class WorldTwin:
         ``map1_from_map2`` that the twin start implies; None when map 2 fits the world
         nowhere else as well.
     twin_overlap : float
-        Overlap of the maps under ``twin`` (:func:`~scenarios.bench.merge.true_overlap`),
+        Overlap of the maps under ``twin`` (:func:`~mrslam_env.evaluation.true_overlap`),
         0.0 without a twin.
     truth_conflicts : float
         Conflicts (search cells) of map 2 with the world at its true start: the map's own

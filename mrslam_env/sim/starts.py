@@ -1,0 +1,127 @@
+"""Where a robot may start: the one clearance rule of every automatic start pose.
+
+Automatic starts are drawn in three places, each with its own way of spreading them out:
+the simulator (:func:`mrslam_env.sim.simulator.choose_starts`, robots beyond the given
+starts), worlds built from maps (:func:`mrslam_env.sim.mapworld.world_from_map`, before
+any start exists) and the merge benchmark's runs
+(:func:`scenarios.bench.merge.pairs.reachable_starts`). All three draw from the cells of
+:func:`start_cells` (or :func:`world_start_points` for a :class:`WorldSpec`):
+
+**The start clearance rule.** On a raster of wall cells, a cell's *clearance estimate* is
+the distance from its centre to the nearest wall cell's centre, less half a cell
+(:func:`cell_clearance`). A robot of radius ``r`` *fits* in a cell whose estimate is at
+least ``r``; it can *start* in a cell that
+
+* lies in the 4-connected region of fitting cells that holds the reference cell (the
+  world's first start; the largest such region when there is none), so that every start
+  can drive to every other, and
+* has an estimate of at least ``r + START_MARGIN``.
+
+The estimate is never below the true distance from the cell centre to the wall cells,
+and at most ``(sqrt(2) - 1) / 2`` of a cell (0.21 cell) above it (a wall cell straight
+across is exactly half a cell nearer than its centre, a diagonal one up to half a
+diagonal nearer). A start cell's true clearance is therefore at least
+``r + START_MARGIN - 0.21 * resolution``: 0.28 m beyond the radius on the 0.1 m raster
+of a world (:data:`START_RESOLUTION`), more on finer map grids.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+
+from mrslam_env.sim.world import WorldSpec, ground_truth_map
+
+__all__ = [
+    "START_MARGIN",
+    "START_RESOLUTION",
+    "cell_clearance",
+    "start_cells",
+    "world_start_points",
+]
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+START_MARGIN = 0.3
+"""Clearance estimate beyond the robot radius that an automatic start needs, m."""
+START_RESOLUTION = 0.1
+"""Cell size of the raster on which starts in a :class:`WorldSpec` are chosen, m."""
+
+
+def cell_clearance(walls: ArrayLike, resolution: float) -> FloatArray:
+    """The clearance estimate (m) of every cell: the distance from its centre to the
+    nearest wall cell's centre, less half a cell (module docstring); negative on walls.
+
+    Parameters
+    ----------
+    walls : array_like of bool, shape (rows, cols)
+        Wall cells. Cells beyond the raster count as free: frame the raster with walls
+        (or leave a margin) where the outside is closed.
+    resolution : float
+        Cell size, m.
+
+    Returns
+    -------
+    ndarray of float64, shape (rows, cols)
+    """
+    free = ~np.asarray(walls, dtype=bool)
+    return (ndimage.distance_transform_edt(free) - 0.5) * resolution
+
+
+def start_cells(
+    walls: ArrayLike,
+    resolution: float,
+    radius: float,
+    *,
+    reachable_from: tuple[int, int] | None = None,
+) -> BoolArray:
+    """The cells where a robot of ``radius`` can start, by the start clearance rule
+    (module docstring).
+
+    Parameters
+    ----------
+    walls : array_like of bool, shape (rows, cols)
+        Wall cells (see :func:`cell_clearance`).
+    resolution : float
+        Cell size, m.
+    radius : float
+        Robot radius, m (>= 0).
+    reachable_from : tuple of int, optional
+        ``(row, col)`` of a cell the starts must be reachable from (the first start);
+        default: the largest region where the robot fits. A cell off the raster, or where
+        the robot does not fit, reaches nothing.
+
+    Returns
+    -------
+    ndarray of bool, shape (rows, cols)
+        All False when there is no such cell.
+    """
+    clearance = cell_clearance(walls, resolution)
+    labels, count = ndimage.label(clearance >= radius)
+    if reachable_from is None:
+        if count == 0:
+            return np.zeros(clearance.shape, dtype=bool)
+        sizes = np.bincount(labels.ravel())
+        sizes[0] = 0
+        label = int(np.argmax(sizes))
+    else:
+        row, col = int(reachable_from[0]), int(reachable_from[1])
+        rows, cols = clearance.shape
+        if not (0 <= row < rows and 0 <= col < cols) or labels[row, col] == 0:
+            return np.zeros(clearance.shape, dtype=bool)
+        label = int(labels[row, col])
+    return (labels == label) & (clearance >= radius + START_MARGIN)
+
+
+def world_start_points(world: WorldSpec, radius: float, reachable_from: ArrayLike) -> FloatArray:
+    """World points (N, 2) where a robot of ``radius`` can start, reachable from the point
+    ``reachable_from`` (x, y): the centres of the :func:`start_cells` of the world's
+    ground-truth raster (:func:`~mrslam_env.sim.world.ground_truth_map`,
+    :data:`START_RESOLUTION`, one cell of margin), in row-major order.
+    """
+    grid = ground_truth_map(world, START_RESOLUTION, margin=START_RESOLUTION)
+    iy, ix = grid.world_to_cell(np.asarray(reachable_from, dtype=np.float64)[:2])
+    cells = start_cells(grid.occupied, START_RESOLUTION, radius, reachable_from=(iy, ix))
+    return grid.cell_to_world(np.argwhere(cells))

@@ -1,0 +1,140 @@
+"""Tests for mrslam_env.sim.starts: the one clearance rule of automatic start poses."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
+from mrslam_env.registry import build_world
+from mrslam_env.sim.mapworld import wall_mask, world_from_map
+from mrslam_env.sim.starts import (
+    START_MARGIN,
+    START_RESOLUTION,
+    cell_clearance,
+    start_cells,
+    world_start_points,
+)
+from mrslam_env.sim.world import WorldSpec, box, ground_truth_map, polyline_walls
+
+R = 0.2
+OVERESTIMATE = (math.sqrt(0.5) - 0.5) * START_RESOLUTION  # at most this above the truth
+
+
+def enclosure(width: float = 10.0, height: float = 6.0, extra: list | None = None) -> WorldSpec:
+    walls = [
+        box(0.0, 0.0, width, 0.1),
+        box(0.0, height - 0.1, width, height),
+        box(0.0, 0.0, 0.1, height),
+        box(width - 0.1, 0.0, width, height),
+        *(extra or []),
+    ]
+    return WorldSpec.from_walls("enclosure", walls, [(1.0, 1.0, 0.0)])
+
+
+def test_cell_clearance_is_centre_distance_less_half_a_cell() -> None:
+    walls = np.zeros((5, 7), dtype=bool)
+    walls[2, 3] = True
+    clearance = cell_clearance(walls, 0.1)
+    assert clearance[2, 3] == pytest.approx(-0.05)
+    assert clearance[2, 4] == pytest.approx(0.05)  # straight across: exact
+    assert clearance[0, 3] == pytest.approx(0.15)
+    assert clearance[1, 4] == pytest.approx((math.sqrt(2) - 0.5) * 0.1)  # diagonal
+
+
+def test_cell_clearance_brackets_the_distance_to_the_wall_cells() -> None:
+    # A world built from a map has exactly the wall cells as walls: the estimate is never
+    # below their exact distance, and at most (sqrt(2) - 1) / 2 of a cell above it.
+    rng = np.random.default_rng(5)
+    cells = np.where(rng.random((40, 40)) < 0.01, OCCUPIED, FREE).astype(np.int8)
+    cells = np.where(ndimage.binary_dilation(cells == OCCUPIED), OCCUPIED, FREE).astype(np.int8)
+    grid = GridMap(cells=cells, resolution=0.05, origin=(0.3, -0.7))
+    world = world_from_map(grid, name="pillars", robot_radius=0.05)
+    walls = np.pad(wall_mask(grid), 1, constant_values=True)
+    estimate = cell_clearance(walls, grid.resolution)[1:-1, 1:-1]
+    free = np.argwhere(grid.cells == FREE)
+    exact = world.clearance(grid.cell_to_world(free))
+    at_free = estimate[free[:, 0], free[:, 1]]
+    assert np.all(at_free >= exact - 1e-9)
+    assert np.all(at_free <= exact + (math.sqrt(0.5) - 0.5) * grid.resolution + 1e-9)
+
+
+def test_cell_clearance_is_safe_on_a_world_raster() -> None:
+    # Wall cells cover every wall (a cell a wall touches is a wall cell): the exact
+    # clearance is at least the estimate less the overestimate.
+    rng = np.random.default_rng(5)
+    pillars = [box(x, y, x + 0.3, y + 0.3) for x, y in rng.uniform(1.0, 8.0, (6, 2))]
+    world = enclosure(extra=pillars)
+    grid = ground_truth_map(world, START_RESOLUTION, margin=START_RESOLUTION)
+    clearance = cell_clearance(grid.occupied, START_RESOLUTION)
+    free = np.argwhere(grid.free)
+    exact = world.clearance(grid.cell_to_world(free))
+    inside = exact > 0
+    estimate = clearance[free[:, 0], free[:, 1]]
+    assert np.all(exact[inside] >= estimate[inside] - OVERESTIMATE - 1e-9)
+
+
+def test_start_cells_need_radius_plus_margin() -> None:
+    walls = np.ones((40, 40), dtype=bool)
+    walls[1:-1, 1:-1] = False
+    cells = start_cells(walls, 0.1, R)
+    clearance = cell_clearance(walls, 0.1)
+    assert cells.any()
+    np.testing.assert_array_equal(cells, clearance >= R + START_MARGIN)
+
+
+def test_start_cells_keep_the_reference_region() -> None:
+    walls = np.ones((30, 60), dtype=bool)
+    walls[1:-1, 1:-1] = False
+    walls[:, 20] = True  # a small room left (cols 1..19), a big one right (21..58)
+    left = start_cells(walls, 0.1, R, reachable_from=(15, 10))
+    right = start_cells(walls, 0.1, R, reachable_from=(15, 40))
+    largest = start_cells(walls, 0.1, R)
+    assert left.any() and right.any()
+    assert not left[:, 20:].any() and not right[:, :21].any()
+    np.testing.assert_array_equal(largest, right)
+
+
+def test_start_cells_reach_nothing_from_a_wall_or_off_the_raster() -> None:
+    walls = np.ones((20, 20), dtype=bool)
+    walls[1:-1, 1:-1] = False
+    for cell in [(0, 0), (-1, 5), (5, 20), (100, 100)]:
+        assert not start_cells(walls, 0.1, R, reachable_from=cell).any()
+    assert not start_cells(np.ones((5, 5), dtype=bool), 0.1, R).any()
+
+
+def test_narrow_passages_split_the_regions() -> None:
+    # Two rooms joined by a 0.3 m slit: a robot of radius 0.2 cannot pass it.
+    world = enclosure(
+        width=8.0,
+        height=2.6,
+        extra=[box(2.5, 0.1, 2.6, 1.15), box(2.5, 1.45, 2.6, 2.5)],
+    )
+    points = world_start_points(world, R, world.starts[0, :2])
+    assert len(points) > 0
+    assert np.all(points[:, 0] < 2.5)
+    small = world_start_points(world, 0.05, world.starts[0, :2])
+    assert np.any(small[:, 0] > 2.6)  # a thin robot gets through
+
+
+def test_world_start_points_have_clearance_and_stay_connected() -> None:
+    walls = polyline_walls([(6.0, 0.1), (6.0, 3.0), (9.9, 3.0)], 0.1)  # a sealed corner room
+    world = enclosure(extra=walls)
+    points = world_start_points(world, R, world.starts[0, :2])
+    assert len(points) > 0
+    assert np.all(world.clearance(points) >= R + START_MARGIN - OVERESTIMATE - 1e-9)
+    sealed = (points[:, 0] > 6.0) & (points[:, 1] < 3.0)
+    assert not sealed.any()
+
+
+@pytest.mark.parametrize("name", ["office", "maze"])
+def test_world_start_points_are_the_cells_of_the_raster(name: str) -> None:
+    world = build_world(name)
+    grid = ground_truth_map(world, START_RESOLUTION, margin=START_RESOLUTION)
+    iy, ix = grid.world_to_cell(world.starts[0, :2])
+    cells = start_cells(grid.occupied, START_RESOLUTION, R, reachable_from=(iy, ix))
+    points = world_start_points(world, R, world.starts[0])
+    np.testing.assert_array_equal(points, grid.cell_to_world(np.argwhere(cells)))
