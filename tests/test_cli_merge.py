@@ -24,11 +24,11 @@ import pytest
 import yaml
 from merge_fixtures import map_pair
 
+from mrslam_env.evaluation import relative_transform_error
 from mrslam_env.geometry import compose
 from mrslam_env.gridmap import OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.mapio import load_map, save_map
 from mrslam_env.merge.fuse import resample_map
-from mrslam_env.merge.pipeline import relative_transform_error
 from scenarios.cli import main
 
 ONE_DEGREE = math.radians(1.0)

@@ -20,16 +20,15 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from mrslam_env.evaluation import relative_transform_error
 from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
+from mrslam_env.merge.decide import ambiguous_rival, refute
 from mrslam_env.merge.dissimilarity import Agreement, distance_maps, largest_conflict
 from mrslam_env.merge.pipeline import (
     MergeConfig,
     ScoredHypothesis,
-    ambiguous_rival,
     merge_maps,
-    refute,
-    relative_transform_error,
     symmetry_proposals,
 )
 

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 from merge_fixtures import map_pair, poses_near, scan_map
 
+from mrslam_env.evaluation import relative_transform_error
 from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.merge.dissimilarity import DissimilarityConfig, acceptance_index
@@ -30,7 +31,6 @@ from mrslam_env.merge.pipeline import (
     MergeInputError,
     MergeResult,
     merge_maps,
-    relative_transform_error,
 )
 from mrslam_env.merge.refine import RandomWalkConfig
 from mrslam_env.registry import build_world

@@ -21,6 +21,7 @@ import pytest
 from merge_fixtures import map_pair
 from scipy import fft as scipy_fft
 
+from mrslam_env.evaluation import relative_transform_error
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
 from mrslam_env.merge.fuse import resample_map
 from mrslam_env.merge.hypotheses import (
@@ -31,7 +32,7 @@ from mrslam_env.merge.hypotheses import (
     wall_orientation_histogram,
 )
 from mrslam_env.merge.mcl import MclConfig
-from mrslam_env.merge.pipeline import MergeConfig, merge_maps, relative_transform_error
+from mrslam_env.merge.pipeline import MergeConfig, merge_maps
 from mrslam_env.merge.virtual import VirtualRobotConfig
 
 TRUTH = np.array([1.0, 2.0, 2.4])

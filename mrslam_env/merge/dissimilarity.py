@@ -53,6 +53,7 @@ from scipy import ndimage
 
 from mrslam_env.geometry import inverse, transform_points
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
+from mrslam_env.validation import check_fields, require
 
 __all__ = [
     "Agreement",
@@ -79,8 +80,7 @@ SIDE_DISTANCE_CAP = 3
 """Cells: the most a wall cell with a side is charged for its distance to the nearest
 wall cell seen from that side. A face of a thick wall that the other map saw only from
 behind has its nearest match far away; uncapped, such cells make psi jump at every small
-move and the random walk stalls (measured on 45 verification-time map pairs of live runs:
-final error p90 0.050 m uncapped, 0.035-0.037 m capped at 3 cells, 0.041 m at 5)."""
+move and the random walk stalls."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True, eq=False)
@@ -153,12 +153,8 @@ class DissimilarityConfig:
         name = type(self).__name__
         for attr in ("restrict_to_overlap", "wall_sides"):
             value = getattr(self, attr)
-            if not isinstance(value, bool):
-                raise ValueError(f"{name}.{attr} must be a bool, got {value!r}")
-        for attr in ("max_free_cells", "min_overlap_cells"):
-            value = getattr(self, attr)
-            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
-                raise ValueError(f"{name}.{attr} must be an int >= 1, got {value!r}")
+            require(name, attr, value, isinstance(value, bool), "a bool")
+        check_fields(self, counts=("max_free_cells", "min_overlap_cells"))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -41,6 +41,7 @@ from mrslam_env.geometry import compose, wrap_angle
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
 from mrslam_env.merge.skeleton import SkeletonConfig, SkeletonGraph, free_space_graph
 from mrslam_env.merge.virtual import VirtualRun
+from mrslam_env.validation import check_fields, require
 
 FloatArray = NDArray[np.float64]
 
@@ -118,49 +119,52 @@ class MclConfig:
 
     def __post_init__(self) -> None:
         name = type(self).__name__
-
-        def check(attr: str, ok: bool, wanted: str) -> None:
-            if not ok:
-                raise ValueError(f"{name}.{attr} must be {wanted}, got {getattr(self, attr)!r}")
-
-        def number(attr: str) -> float:
-            value = getattr(self, attr)
-            ok = isinstance(value, int | float) and not isinstance(value, bool)
-            check(attr, ok and math.isfinite(value), "a finite number")
-            return float(value)
-
-        for attr in ("n_particles", "initial_particles", "beams_per_scan", "max_clusters"):
-            value = getattr(self, attr)
-            ok = isinstance(value, int) and not isinstance(value, bool) and value >= 1
-            check(attr, ok, "an int >= 1")
-        for attr in (
-            "skeleton_radius",
-            "aligned_heading_std",
-            "motion_xy_noise",
-            "motion_xy_noise_per_m",
-            "motion_theta_noise",
-            "motion_theta_noise_per_rad",
-            "unknown_pose_penalty",
-            "occupied_pose_penalty",
-        ):
-            check(attr, number(attr) >= 0, "a finite number >= 0")
-        for attr in ("sigma_hit", "evidence_per_scan", "cluster_radius", "cluster_angle"):
-            check(attr, number(attr) > 0, "a finite number > 0")
-        for attr in (
+        fractions = (
             "aligned_heading_fraction",
             "resample_threshold",
             "injection_fraction",
             "converged_fraction",
             "min_cluster_weight",
-        ):
-            check(attr, 0 <= number(attr) <= 1, "in [0, 1]")
-        check("z_rand", 0 < number("z_rand") < 1, "in (0, 1)")
-        check(
+        )
+        check_fields(
+            self,
+            positive=(
+                "sigma_hit",
+                "evidence_per_scan",
+                "cluster_radius",
+                "cluster_angle",
+                "z_rand",
+                "unknown_likelihood",
+            ),
+            non_negative=(
+                "skeleton_radius",
+                "aligned_heading_std",
+                "motion_xy_noise",
+                "motion_xy_noise_per_m",
+                "motion_theta_noise",
+                "motion_theta_noise_per_rad",
+                "unknown_pose_penalty",
+                "occupied_pose_penalty",
+                *fractions,
+            ),
+            counts=("n_particles", "initial_particles", "beams_per_scan", "max_clusters"),
+        )
+        for attr in fractions:
+            value = getattr(self, attr)
+            require(name, attr, value, value <= 1, "in [0, 1]")
+        require(name, "z_rand", self.z_rand, self.z_rand < 1, "in (0, 1)")
+        unknown = self.unknown_likelihood
+        require(
+            name,
             "unknown_likelihood",
-            self.z_rand < number("unknown_likelihood") < 1,
+            unknown,
+            self.z_rand < unknown < 1,
             f"in (z_rand={self.z_rand}, 1)",
         )
-        check("skeleton", isinstance(self.skeleton, SkeletonConfig), "a SkeletonConfig")
+        skeleton = self.skeleton
+        require(
+            name, "skeleton", skeleton, isinstance(skeleton, SkeletonConfig), "a SkeletonConfig"
+        )
 
 
 @dataclass(frozen=True, slots=True)

@@ -15,19 +15,33 @@ overlap fits tightly), and no *different* transform explains the maps about as w
 (ambiguity: symmetric buildings, repeated rooms). Otherwise the answer is "no confident
 merge" with the reason, never a guess. The winner is refined again at the finer input
 resolution and the maps are fused.
+
+:func:`merge_maps` runs the stages in order: prepare, propose, score, decide (the rules,
+each a named pure function in :mod:`mrslam_env.merge.decide`), refine, fuse.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from mrslam_env.geometry import compose, inverse, transform_points, wrap_scalar
+from mrslam_env.geometry import compose, inverse, wrap_scalar
 from mrslam_env.gridmap import GridMap
+from mrslam_env.merge.decide import (
+    Candidates,
+    ambiguous_rival,
+    decide,
+    judge,
+    refute,
+    same_answer,
+)
 from mrslam_env.merge.dissimilarity import (
     Agreement,
     DissimilarityConfig,
@@ -48,6 +62,7 @@ from mrslam_env.merge.hypotheses import (
 from mrslam_env.merge.mcl import MclConfig
 from mrslam_env.merge.refine import RandomWalkConfig, RandomWalkResult, refine_random_walk
 from mrslam_env.merge.virtual import VirtualRobotConfig
+from mrslam_env.validation import check_fields, require
 
 __all__ = [
     "MergeConfig",
@@ -58,7 +73,7 @@ __all__ = [
     "ambiguous_rival",
     "merge_maps",
     "refine_transform",
-    "relative_transform_error",
+    "same_answer",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -98,10 +113,8 @@ class MergeConfig:
     )
     """The last refinement, at the input resolution. Its psi matches walls by the side
     they were seen from (``DissimilarityConfig.wall_sides``): two robots often see a thin
-    wall from its two sides, and plain psi then lays the faces over each other. On 45
-    verification-time map pairs of live runs (3 seeds each) the final error was median
-    0.024 m, p90 0.048 m, max 0.105 m with plain psi; median 0.024, p90 0.040, max
-    0.082 m with wall sides (600 iterations; 200 left some walks short, max 0.11 m)."""
+    wall from its two sides, and plain psi then lays the faces over each other, a wall's
+    thickness off. 600 iterations: shorter walks leave some short of the optimum."""
     candidates: int = 4
     """How many of each direction's ranked hypotheses are refined and judged."""
     correlation: CorrelationConfig = field(default_factory=CorrelationConfig)
@@ -109,19 +122,18 @@ class MergeConfig:
     correlation_candidates: int = 4
     """How many of the wall-correlation placements are refined and judged besides the
     virtual robot's (0 disables the source). The virtual robot misses the true placement
-    when no short run both crosses a small overlap and converges there (6 of 64
-    overlapping benchmark pairs of seed 1); the correlation ranked it in its first four on
-    all of them, at about 30 ms a pair."""
+    when no short run both crosses a small overlap and converges there; the correlation
+    ranks it among its first few, for a few tens of ms a pair."""
     min_correlation_overlap: float = 0.2
-    """A best candidate that only the wall correlation proposed (no confident virtual-robot
-    candidate is the same answer) is accepted only when it overlaps at least this
+    """A best candidate that only the wall correlation proposed (no confident candidate of
+    another source is the same answer) is accepted only when it overlaps at least this
     fraction of the smaller map's known cells (:attr:`Agreement.overlap_fraction`);
-    otherwise the answer is "no confident merge". The correlation tries every translation
-    at every wall-aligned rotation, so a chance fit of a small piece of a repetitive
-    building (a maze corridor, the next shelf aisle) is far likelier among its proposals
-    than among the virtual robot's: on the benchmark's no-overlap pairs such fits covered
-    10-14 % of the smaller map, true small overlaps it found 23-44 %. Such candidates still
-    count as rivals in the ambiguity test."""
+    otherwise the answer is "no confident merge"
+    (:func:`~mrslam_env.merge.decide.rule_correlation_covers_enough`). The correlation
+    tries every translation at every wall-aligned rotation, so a chance fit of a small
+    piece of a repetitive building (a maze corridor, the next shelf aisle) is far likelier
+    among its proposals than among the virtual robot's. Such candidates still count as
+    rivals in the ambiguity test."""
     min_acceptance_index: float = 0.9
     """A confident merge agrees on at least this fraction of the cells known in both."""
     max_conflict_fraction: float = 0.01
@@ -133,31 +145,28 @@ class MergeConfig:
     """A best candidate that overlaps less than this (m²) ..."""
     small_overlap_max_psi: float = 0.6
     """... is accepted only when it fits tightly: psi at most this (cells of the working
-    grid). A room fitted onto a similar room, or a dead end onto another, agrees almost
-    everywhere on a few m² but leaves walls a cell or two apart; a true small overlap has
-    little drift to blur it. On the merge benchmark's 240 pairs this turned two of the
-    seven wrong answers (no-overlap pairs fitted over 6.3 and 7.3 m² at psi 0.93 and 0.92)
-    into refusals and cost no success; true merges under 8 m² had psi up to 0.53, while
-    larger true overlaps reach psi 1.0-1.3 (more drift), hence the area limit."""
+    grid; :func:`~mrslam_env.merge.decide.rule_small_overlap_fits_tightly`). A room fitted
+    onto a similar room, or a dead end onto another, agrees almost everywhere on a few m²
+    but leaves walls a cell or two apart; a true small overlap has little drift to blur
+    it, while larger true overlaps drift more, hence the area limit."""
     conflict_weight: float = 10.0
     """Score of a candidate: ``(agree - conflict_weight * conflicts) * cell area`` (m²)."""
     ambiguity_ratio: float = 0.25
     """Refuse when a confident candidate that is a *different* transform scores at least
-    this fraction of the best one. Low on purpose: in repetitive buildings (shelf aisles,
-    mirrored wings) the wrong placement often overlaps *more* than the right one and
-    scores higher, so only "a second consistent answer exists at all" is a safe signal;
-    the live system settles such cases by rendezvous instead."""
+    this fraction of the best one (:func:`~mrslam_env.merge.decide.rule_unambiguous`).
+    Low on purpose: in repetitive buildings (shelf aisles, mirrored wings) the wrong
+    placement often overlaps *more* than the right one and scores higher, so only "a
+    second consistent answer exists at all" is a safe signal; the live system settles
+    such cases by rendezvous instead."""
     contradicted_rival_factor: float = 3.0
     """A rival with at least this many times the best candidate's conflicts plus one ..."""
     contradicted_rival_length: float = 0.3
     """... whose largest unbroken group of conflicts is at least this long (m) ..."""
     contradicted_rival_ratio: float = 0.6
     """... makes the answer ambiguous only from this fraction of the best score, instead of
-    ``ambiguity_ratio``. A part of one map fitted elsewhere (often a wing turned by 180°)
-    leaves a few wall cells on open floor; the true placement of a clean pair leaves none
-    or one or two. On the merge benchmark such rivals (4-19 conflicts, stretches of
-    0.4-1.0 m, 50-70 % of the best score) made ours refuse pairs whose maps single out the
-    truth."""
+    ``ambiguity_ratio`` (:func:`~mrslam_env.merge.decide.contradicted`). A part of one map
+    fitted elsewhere (often a wing turned by 180°) leaves a few wall cells on open floor;
+    the true placement of a clean pair leaves none or one or two."""
     distinct_translation: float = 0.5
     """Two transforms are the same answer when they move m2's known centre less than this
     (m) apart ..."""
@@ -168,9 +177,9 @@ class MergeConfig:
     answer) when its conflicts include an unbroken group of at least this many metres
     (cells x resolution: a wall of one map lying across open floor of the other) while
     a different confident candidate is clean (see ``clean_conflict_length``) and fits at
-    least as well (psi). Under the true transform the largest group seen on the
-    benchmark pairs was 1.0 m (drift, a wall seen through a doorway); a shelf row or
-    outer wall placed across an aisle gives 2.3-4.7 m."""
+    least as well (psi; :func:`~mrslam_env.merge.decide.refute`). Drift under the true
+    transform (a wall seen through a doorway) leaves shorter groups than a shelf row or
+    outer wall placed across an aisle."""
     clean_conflict_length: float = 0.5
     """A candidate whose largest conflict group is at most this long (m) is clean."""
     symmetry_proposals: int = 3
@@ -182,66 +191,52 @@ class MergeConfig:
 
     def __post_init__(self) -> None:
         name = type(self).__name__
-
-        def number(attr: str) -> float:
-            value = getattr(self, attr)
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise ValueError(f"{name}.{attr} must be a number, got {value!r}")
-            if not math.isfinite(value):
-                raise ValueError(f"{name}.{attr} must be finite, got {value!r}")
-            return float(value)
-
-        for attr in (
-            "working_resolution",
-            "min_known_area",
-            "min_overlap_area",
-            "small_overlap_max_psi",
-            "distinct_translation",
-            "distinct_rotation",
-        ):
-            if number(attr) <= 0:
-                raise ValueError(f"{name}.{attr} must be > 0, got {getattr(self, attr)!r}")
-        if number("max_resolution_ratio") < 1.0:
-            raise ValueError(
-                f"{name}.max_resolution_ratio must be >= 1, got {self.max_resolution_ratio!r}"
-            )
-        for attr in ("contradicted_rival_factor", "contradicted_rival_length"):
-            if number(attr) < 0:
-                raise ValueError(f"{name}.{attr} must be >= 0, got {getattr(self, attr)!r}")
-        if number("small_overlap_area") < 0:
-            raise ValueError(
-                f"{name}.small_overlap_area must be >= 0, got {self.small_overlap_area!r}"
-            )
-        if number("conflict_weight") < 0:
-            raise ValueError(f"{name}.conflict_weight must be >= 0, got {self.conflict_weight!r}")
-        for attr in (
+        fractions = (
             "min_acceptance_index",
             "max_conflict_fraction",
             "ambiguity_ratio",
             "contradicted_rival_ratio",
             "min_correlation_overlap",
-        ):
-            if not 0.0 <= number(attr) <= 1.0:
-                raise ValueError(f"{name}.{attr} must be in [0, 1], got {getattr(self, attr)!r}")
-        value = self.correlation_candidates
-        if not (isinstance(value, int) and not isinstance(value, bool) and value >= 0):
-            raise ValueError(f"{name}.correlation_candidates must be an int >= 0, got {value!r}")
-        for attr in ("max_working_cells", "candidates"):
+        )
+        check_fields(
+            self,
+            positive=(
+                "working_resolution",
+                "max_resolution_ratio",
+                "min_known_area",
+                "min_overlap_area",
+                "small_overlap_max_psi",
+                "distinct_translation",
+                "distinct_rotation",
+                "refuting_conflict_length",
+            ),
+            non_negative=(
+                "small_overlap_area",
+                "conflict_weight",
+                "contradicted_rival_factor",
+                "contradicted_rival_length",
+                "clean_conflict_length",
+                *fractions,
+            ),
+            counts=("max_working_cells", "candidates"),
+        )
+        for attr in fractions:
             value = getattr(self, attr)
-            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
-                raise ValueError(f"{name}.{attr} must be an int >= 1, got {value!r}")
-        value = self.symmetry_proposals
-        if not (isinstance(value, int) and not isinstance(value, bool) and value >= 0):
-            raise ValueError(f"{name}.symmetry_proposals must be an int >= 0, got {value!r}")
-        if number("clean_conflict_length") < 0:
-            raise ValueError(
-                f"{name}.clean_conflict_length must be >= 0, got {self.clean_conflict_length!r}"
-            )
-        if number("refuting_conflict_length") <= self.clean_conflict_length:
-            raise ValueError(
-                f"{name}.refuting_conflict_length must be > clean_conflict_length "
-                f"({self.clean_conflict_length}), got {self.refuting_conflict_length!r}"
-            )
+            require(name, attr, value, value <= 1.0, "in [0, 1]")
+        ratio = self.max_resolution_ratio
+        require(name, "max_resolution_ratio", ratio, ratio >= 1.0, ">= 1")
+        for attr in ("correlation_candidates", "symmetry_proposals"):
+            value = getattr(self, attr)
+            whole = isinstance(value, int) and not isinstance(value, bool) and value >= 0
+            require(name, attr, value, whole, "an int >= 0")
+        clean = self.clean_conflict_length
+        require(
+            name,
+            "refuting_conflict_length",
+            self.refuting_conflict_length,
+            self.refuting_conflict_length > clean,
+            f"> clean_conflict_length ({clean})",
+        )
         for attr, kind in (
             ("virtual", VirtualRobotConfig),
             ("mcl", MclConfig),
@@ -251,8 +246,7 @@ class MergeConfig:
             ("final_random_walk", RandomWalkConfig),
         ):
             value = getattr(self, attr)
-            if not isinstance(value, kind):
-                raise ValueError(f"{name}.{attr} must be a {kind.__name__}, got {value!r}")
+            require(name, attr, value, isinstance(value, kind), f"a {kind.__name__}")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -455,136 +449,7 @@ def _at_resolution(grid: GridMap, resolution: float) -> GridMap:
     return resample_map(grid, resolution)
 
 
-def same_answer(a: FloatArray, b: FloatArray, pivot: FloatArray, config: MergeConfig) -> bool:
-    """Whether two transforms are one answer: they put ``pivot`` (a point of m2, its
-    frame) within ``distinct_translation`` and turn within ``distinct_rotation``."""
-    point = np.asarray(pivot, dtype=np.float64)[None, :]
-    moved = float(np.hypot(*(transform_points(a, point)[0] - transform_points(b, point)[0])))
-    turned = abs(wrap_scalar(float(a[2] - b[2])))
-    return moved < config.distinct_translation and turned < config.distinct_rotation
-
-
-# --- judging -------------------------------------------------------------------------------
-
-
-def judge(agreement: Agreement, resolution: float, config: MergeConfig) -> tuple[float, bool, str]:
-    """Score (m²), whether it is confident, and if not, why (one phrase)."""
-    cell_area = resolution**2
-    score = (agreement.agree - config.conflict_weight * agreement.conflicts) * cell_area
-    overlap_area = agreement.overlap * cell_area
-    if overlap_area < config.min_overlap_area:
-        return score, False, f"overlap {overlap_area:.1f} m² < {config.min_overlap_area} m²"
-    if agreement.index < config.min_acceptance_index:
-        return (
-            score,
-            False,
-            f"acceptance index {agreement.index:.3f} < {config.min_acceptance_index}",
-        )
-    if agreement.conflict_fraction > config.max_conflict_fraction:
-        return (
-            score,
-            False,
-            f"conflicts {agreement.conflict_fraction:.3f} > {config.max_conflict_fraction}",
-        )
-    return score, True, ""
-
-
-def _score_candidate(
-    w1: GridMap,
-    w2: GridMap,
-    d1: DistanceMaps,
-    d2: DistanceMaps,
-    hypothesis_transform: FloatArray,
-    support: float,
-    votes: int,
-    config: MergeConfig,
-    rng: np.random.Generator,
-    trace: bool,
-) -> tuple[ScoredHypothesis, RandomWalkResult, str]:
-    walk = refine_random_walk(
-        w1,
-        w2,
-        hypothesis_transform,
-        config=config.random_walk,
-        rng=rng,
-        distances1=d1,
-        distances2=d2,
-        trace=trace,
-    )
-    agreement = acceptance_index(w1, w2, walk.transform, distances1=d1, distances2=d2)
-    score, confident, why = judge(agreement, w1.resolution, config)
-    conflict_length = (
-        largest_conflict(w1, w2, walk.transform, distances1=d1, distances2=d2) * w1.resolution
-        if confident
-        else 0.0
-    )
-    scored = ScoredHypothesis(
-        map1_from_map2=np.asarray(walk.transform, dtype=np.float64),
-        initial=np.asarray(hypothesis_transform, dtype=np.float64),
-        support=support,
-        votes=votes,
-        psi=float(walk.psi),
-        agreement=agreement,
-        score=score,
-        confident=confident,
-        conflict_length=conflict_length,
-    )
-    return scored, walk, why
-
-
-def refute(
-    scored: list[ScoredHypothesis], pivot: FloatArray, config: MergeConfig
-) -> list[tuple[int, str]]:
-    """Which confident candidates the evidence refutes, with why (indices into ``scored``).
-
-    A confident candidate is refuted when one unbroken group of its conflicts is at least
-    ``refuting_conflict_length`` long (a wall across open floor, which drift does not
-    produce) and a *different* confident candidate is clean (largest group at most
-    ``clean_conflict_length``) and fits at least as well (psi no larger). Only a
-    candidate that has a clean rival is refuted, so evidence can settle an ambiguity
-    but never leaves a refuted candidate as the answer.
-    """
-    clean = [h for h in scored if h.confident and h.conflict_length <= config.clean_conflict_length]
-    refuted = []
-    for index, h in enumerate(scored):
-        if not h.confident or h.conflict_length < config.refuting_conflict_length:
-            continue
-        if any(
-            c.psi <= h.psi and not same_answer(c.map1_from_map2, h.map1_from_map2, pivot, config)
-            for c in clean
-        ):
-            refuted.append(
-                (index, f"refuted: a {h.conflict_length:.1f} m wall of one map on open floor")
-            )
-    return refuted
-
-
-def ambiguous_rival(
-    scored: list[ScoredHypothesis], pivot: FloatArray, config: MergeConfig
-) -> ScoredHypothesis | None:
-    """The first confident candidate that is a *different* answer from the best one
-    (``scored[0]``, sorted best first) and scores enough to make the answer ambiguous, or
-    None.
-
-    Enough is ``ambiguity_ratio`` of the best score; for a *contradicted* rival (at least
-    ``contradicted_rival_factor`` x (best's conflicts + 1) conflicts, with an unbroken
-    group of at least ``contradicted_rival_length``) it is ``contradicted_rival_ratio``.
-    """
-    best = scored[0]
-    for other in scored[1:]:
-        if not other.confident or same_answer(
-            best.map1_from_map2, other.map1_from_map2, pivot, config
-        ):
-            continue
-        contradicted = (
-            other.agreement.conflicts
-            >= config.contradicted_rival_factor * (best.agreement.conflicts + 1)
-            and other.conflict_length >= config.contradicted_rival_length
-        )
-        ratio = config.contradicted_rival_ratio if contradicted else config.ambiguity_ratio
-        if other.score >= ratio * best.score:
-            return other
-    return None
+# --- aliasing check -------------------------------------------------------------------------
 
 
 def symmetry_proposals(
@@ -613,13 +478,63 @@ def symmetry_proposals(
     return proposals
 
 
-# --- the pipeline ----------------------------------------------------------------------------
+# --- the stages --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True, kw_only=True, eq=False)
+class _Working:
+    """Both maps at the working resolution, with what every later stage reads of them."""
+
+    w1: GridMap
+    w2: GridMap
+    d1: DistanceMaps
+    d2: DistanceMaps
+    pivot: FloatArray
+    """The centre of m2's known cells, m2's frame (m): where transforms are compared."""
+    resolution: float
+
+
+class _Judged(NamedTuple):
+    """One refined and judged candidate, its random walk, and why it is not confident."""
+
+    hypothesis: ScoredHypothesis
+    walk: RandomWalkResult
+    why: str
+
+
+def _prepare(m1: GridMap, m2: GridMap, config: MergeConfig) -> _Working:
+    """Check the input (:class:`MergeInputError`) and bring both maps to the working
+    resolution, with their distance maps."""
+    _check_input(m1, "map 1", config)
+    _check_input(m2, "map 2", config)
+    ratio = max(m1.resolution, m2.resolution) / min(m1.resolution, m2.resolution)
+    if ratio > config.max_resolution_ratio:
+        raise MergeInputError(
+            f"resolutions {m1.resolution} m and {m2.resolution} m differ by {ratio:.1f}x "
+            f"(at most {config.max_resolution_ratio}x)"
+        )
+    resolution = _working_resolution(m1, m2, config)
+    w1, w2 = _at_resolution(m1, resolution), _at_resolution(m2, resolution)
+    for name, working in (("map 1", w1), ("map 2", w2)):
+        if not working.free.any():
+            raise MergeInputError(
+                f"{name} has no free space left at the working resolution {resolution:g} m "
+                "(only scattered free cells)"
+            )
+    sides = config.random_walk.dissimilarity.wall_sides
+    pivot = w2.cell_to_world(np.argwhere(~w2.unknown).mean(axis=0)[None, :])[0]
+    return _Working(
+        w1=w1,
+        w2=w2,
+        d1=distance_maps(w1, sides=sides),
+        d2=distance_maps(w2, sides=sides),
+        pivot=pivot,
+        resolution=resolution,
+    )
 
 
 def _propose(
-    w1: GridMap,
-    w2: GridMap,
-    pivot: FloatArray,
+    work: _Working,
     config: MergeConfig,
     rng: np.random.Generator,
     trace: bool,
@@ -632,6 +547,7 @@ def _propose(
     duplicates (:func:`same_answer`) dropped; at most ``candidates`` from each. Then the
     best ``correlation_candidates`` wall-correlation placements that are not duplicates.
     Each entry: transform, support, votes, source (:attr:`ScoredHypothesis.proposed_by`)."""
+    w1, w2, pivot = work.w1, work.w2, work.pivot
     forward = generate_hypotheses(
         w1, w2, virtual=config.virtual, mcl=config.mcl, pooling=config.pooling, rng=rng,
         trace=trace,
@@ -652,14 +568,128 @@ def _propose(
             ):
                 initials.append((*ranked[k], "virtual robot"))
     if config.correlation_candidates > 0:
-        tick = time.perf_counter()
-        placements = correlation_hypotheses(w1, w2, config.correlation)
-        for placement in placements[: config.correlation_candidates]:
-            transform = placement.map1_from_map2
-            if not any(same_answer(transform, kept[0], pivot, config) for kept in initials):
-                initials.append((transform, 0.0, 0, "correlation"))
-        seconds["hypotheses.correlation"] = time.perf_counter() - tick
+        with _timed(seconds, "hypotheses.correlation"):
+            placements = correlation_hypotheses(w1, w2, config.correlation)
+            for placement in placements[: config.correlation_candidates]:
+                transform = placement.map1_from_map2
+                if not any(same_answer(transform, kept[0], pivot, config) for kept in initials):
+                    initials.append((transform, 0.0, 0, "correlation"))
     return forward, initials
+
+
+def _score_candidate(
+    work: _Working,
+    hypothesis_transform: FloatArray,
+    support: float,
+    votes: int,
+    source: str,
+    config: MergeConfig,
+    rng: np.random.Generator,
+    trace: bool,
+) -> _Judged:
+    """One proposal refined by the random walk and judged (:func:`judge`); the length of
+    its largest conflict group is measured when it is confident."""
+    w1, w2, d1, d2 = work.w1, work.w2, work.d1, work.d2
+    walk = refine_random_walk(
+        w1,
+        w2,
+        hypothesis_transform,
+        config=config.random_walk,
+        rng=rng,
+        distances1=d1,
+        distances2=d2,
+        trace=trace,
+    )
+    agreement = acceptance_index(w1, w2, walk.transform, distances1=d1, distances2=d2)
+    score, confident, why = judge(agreement, w1.resolution, config)
+    conflict_length = (
+        largest_conflict(w1, w2, walk.transform, distances1=d1, distances2=d2) * w1.resolution
+        if confident
+        else 0.0
+    )
+    scored = ScoredHypothesis(
+        map1_from_map2=np.asarray(walk.transform, dtype=np.float64),
+        initial=np.asarray(hypothesis_transform, dtype=np.float64),
+        support=support,
+        votes=votes,
+        psi=float(walk.psi),
+        agreement=agreement,
+        score=score,
+        confident=confident,
+        conflict_length=conflict_length,
+        proposed_by=source,
+    )
+    return _Judged(scored, walk, why)
+
+
+def _rank(judged: list[_Judged], pivot: FloatArray, config: MergeConfig) -> list[_Judged]:
+    """Withdraw confidence from the candidates :func:`refute` refutes, then sort:
+    confident first, each group by decreasing score (stable)."""
+    judged = list(judged)
+    for index, why in refute([j.hypothesis for j in judged], pivot, config):
+        refuted = replace(judged[index].hypothesis, confident=False, refuted=True)
+        judged[index] = _Judged(refuted, judged[index].walk, why)
+    return sorted(judged, key=lambda j: (not j.hypothesis.confident, -j.hypothesis.score))
+
+
+def _score(
+    work: _Working,
+    initials: list[tuple[FloatArray, float, int, str]],
+    config: MergeConfig,
+    rng: np.random.Generator,
+    trace: bool,
+) -> tuple[Candidates, list[RandomWalkResult]]:
+    """Refine and judge every proposal, refute and rank (:func:`_rank`); when the best is
+    then confident, also judge the placements a repeating building would allow
+    (:func:`symmetry_proposals`, the aliasing check) and rank again. Returns the ranked
+    candidates and their random walks, in the same order."""
+    judged = [
+        _score_candidate(work, transform, support, votes, source, config, rng, trace)
+        for transform, support, votes, source in initials
+    ]
+    judged = _rank(judged, work.pivot, config)
+    if judged and judged[0].hypothesis.confident:
+        scored = [j.hypothesis for j in judged]
+        for transform in symmetry_proposals(scored, work.pivot, config):
+            judged.append(_score_candidate(work, transform, 0.0, 0, "symmetry", config, rng, trace))
+        judged = _rank(judged, work.pivot, config)
+    candidates = Candidates(
+        hypotheses=[j.hypothesis for j in judged],
+        reasons=[j.why for j in judged],
+        pivot=work.pivot,
+        resolution=work.resolution,
+    )
+    return candidates, [j.walk for j in judged]
+
+
+def _refine_final(
+    m1: GridMap,
+    m2: GridMap,
+    work: _Working,
+    chosen: ScoredHypothesis,
+    config: MergeConfig,
+    rng: np.random.Generator,
+) -> tuple[FloatArray, float, Agreement]:
+    """The accepted transform refined once more at the finer input resolution, when it is
+    finer than the working one; otherwise as judged. Transform, psi, agreement."""
+    fine = min(m1.resolution, m2.resolution)
+    if fine < work.resolution * (1.0 - 1e-9):
+        return _refine_at_input_resolution(m1, m2, chosen.map1_from_map2, config, rng)
+    psi = dissimilarity(
+        work.w1, work.w2, chosen.map1_from_map2, distances1=work.d1, distances2=work.d2
+    )
+    return chosen.map1_from_map2, float(psi), chosen.agreement
+
+
+@contextmanager
+def _timed(seconds: dict[str, float], stage: str) -> Iterator[None]:
+    """Record the wall time of the ``with`` block as ``seconds[stage]``."""
+    tick = time.perf_counter()
+    yield
+    seconds[stage] = time.perf_counter() - tick
+
+
+# --- the pipeline ----------------------------------------------------------------------------
 
 
 def merge_maps(
@@ -671,6 +701,12 @@ def merge_maps(
     trace: bool = False,
 ) -> MergeResult:
     """Merge two partial occupancy maps by virtual robot motion (docs/design.md §5).
+
+    The stages: :func:`_prepare` (input checks, working resolution), :func:`_propose`
+    (virtual robot both ways, wall correlation), :func:`_score` (random walk, judge,
+    refute, rank, aliasing check), :func:`~mrslam_env.merge.decide.decide` (the decision
+    rules), :func:`_refine_final` (at the input resolution) and
+    :func:`~mrslam_env.merge.fuse.fuse_maps`.
 
     Parameters
     ----------
@@ -700,81 +736,24 @@ def merge_maps(
         rng = np.random.default_rng(0 if rng is None else rng)
     started = time.perf_counter()
     seconds: dict[str, float] = {}
-    _check_input(m1, "map 1", config)
-    _check_input(m2, "map 2", config)
-    ratio = max(m1.resolution, m2.resolution) / min(m1.resolution, m2.resolution)
-    if ratio > config.max_resolution_ratio:
-        raise MergeInputError(
-            f"resolutions {m1.resolution} m and {m2.resolution} m differ by {ratio:.1f}x "
-            f"(at most {config.max_resolution_ratio}x)"
-        )
-
-    tick = time.perf_counter()
-    resolution = _working_resolution(m1, m2, config)
-    w1, w2 = _at_resolution(m1, resolution), _at_resolution(m2, resolution)
-    for name, working in (("map 1", w1), ("map 2", w2)):
-        if not working.free.any():
-            raise MergeInputError(
-                f"{name} has no free space left at the working resolution {resolution:g} m "
-                "(only scattered free cells)"
-            )
-    sides = config.random_walk.dissimilarity.wall_sides
-    d1, d2 = distance_maps(w1, sides=sides), distance_maps(w2, sides=sides)
-    seconds["prepare"] = time.perf_counter() - tick
-
-    tick = time.perf_counter()
-    pivot = w2.cell_to_world(np.argwhere(~w2.unknown).mean(axis=0)[None, :])[0]
-    proposals, initials = _propose(w1, w2, pivot, config, rng, trace, seconds)
-    seconds["hypotheses"] = time.perf_counter() - tick
-
-    tick = time.perf_counter()
-    scored: list[ScoredHypothesis] = []
-    walks: list[RandomWalkResult] = []
-    reasons: list[str] = []
-    for transform, support, votes, source in initials:
-        candidate, walk, why = _score_candidate(
-            w1, w2, d1, d2, transform, support, votes, config, rng, trace
-        )
-        scored.append(replace(candidate, proposed_by=source))
-        walks.append(walk)
-        reasons.append(why)
-
-    def rank() -> None:
-        nonlocal scored, walks, reasons
-        for index, why in refute(scored, pivot, config):
-            scored[index] = replace(scored[index], confident=False, refuted=True)
-            reasons[index] = why
-        order = sorted(
-            range(len(scored)), key=lambda i: (not scored[i].confident, -scored[i].score)
-        )
-        scored = [scored[i] for i in order]
-        walks = [walks[i] for i in order]
-        reasons = [reasons[i] for i in order]
-
-    rank()
-    if scored and scored[0].confident:
-        for transform in symmetry_proposals(scored, pivot, config):
-            candidate, walk, why = _score_candidate(
-                w1, w2, d1, d2, transform, 0.0, 0, config, rng, trace
-            )
-            scored.append(replace(candidate, proposed_by="symmetry"))
-            walks.append(walk)
-            reasons.append(why)
-        rank()
-    seconds["judge"] = time.perf_counter() - tick
-
+    with _timed(seconds, "prepare"):
+        work = _prepare(m1, m2, config)
+    with _timed(seconds, "hypotheses"):
+        proposals, initials = _propose(work, config, rng, trace, seconds)
+    with _timed(seconds, "judge"):
+        candidates, walks = _score(work, initials, config, rng, trace)
+    decision = decide(candidates, config)
     merge_trace = (
-        MergeTrace(working1=w1, working2=w2, hypotheses=proposals, refinements=walks)
+        MergeTrace(working1=work.w1, working2=work.w2, hypotheses=proposals, refinements=walks)
         if trace
         else None
     )
-
-    def refuse(reason: str) -> MergeResult:
+    if decision.chosen is None:
         seconds["total"] = time.perf_counter() - started
         return MergeResult(
             transform=None,
-            reason=f"no confident merge: {reason}",
-            hypotheses=scored,
+            reason=decision.reason,
+            hypotheses=candidates.hypotheses,
             chosen=None,
             fused=None,
             agreement=None,
@@ -782,72 +761,20 @@ def merge_maps(
             seconds=seconds,
             trace=merge_trace,
         )
-
-    if not scored:
-        return refuse("the virtual robot found no hypothesis (too little structure)")
-    best = scored[0]
-    if not best.confident:
-        return refuse(f"best hypothesis fails: {reasons[0]}")
-    rival = ambiguous_rival(scored, pivot, config)
-    if rival is not None:
-        return refuse(
-            "ambiguous: two different transforms fit "
-            f"(scores {best.score:.1f} and {rival.score:.1f} m²)"
-        )
-    if (
-        best.proposed_by == "correlation"
-        and best.agreement.overlap_fraction < config.min_correlation_overlap
-        and not any(
-            o.confident
-            and o.proposed_by != "correlation"
-            and same_answer(best.map1_from_map2, o.map1_from_map2, pivot, config)
-            for o in scored[1:]
-        )
-    ):
-        return refuse(
-            "only the wall correlation proposes the best transform and it overlaps "
-            f"{best.agreement.overlap_fraction:.0%} of the smaller map "
-            f"(< {config.min_correlation_overlap:.0%})"
-        )
-
-    overlap_area = best.agreement.overlap * resolution**2
-    if overlap_area < config.small_overlap_area and best.psi > config.small_overlap_max_psi:
-        return refuse(
-            f"the best transform overlaps only {overlap_area:.1f} m² and fits loosely "
-            f"(psi {best.psi:.2f} > {config.small_overlap_max_psi} cells)"
-        )
-
-    tick = time.perf_counter()
-    transform = best.map1_from_map2
-    agreement = best.agreement
-    fine = min(m1.resolution, m2.resolution)
-    if fine < resolution * (1.0 - 1e-9):
-        transform, psi, agreement = _refine_at_input_resolution(m1, m2, transform, config, rng)
-    else:
-        psi = float(dissimilarity(w1, w2, transform, distances1=d1, distances2=d2))
-    seconds["final_refine"] = time.perf_counter() - tick
-
-    tick = time.perf_counter()
-    fused = fuse_maps(m1, _at_resolution(m2, m1.resolution), transform)
-    seconds["fuse"] = time.perf_counter() - tick
+    with _timed(seconds, "final_refine"):
+        transform, psi, agreement = _refine_final(m1, m2, work, decision.chosen, config, rng)
+    with _timed(seconds, "fuse"):
+        fused = fuse_maps(m1, _at_resolution(m2, m1.resolution), transform)
     seconds["total"] = time.perf_counter() - started
-    runner_up = next(
-        (
-            o
-            for o in scored[1:]
-            if o.confident and not same_answer(best.map1_from_map2, o.map1_from_map2, pivot, config)
-        ),
-        None,
-    )
-    margin = "" if runner_up is None else f", next confident candidate {runner_up.score:.1f} m²"
+    fine = min(m1.resolution, m2.resolution)
     return MergeResult(
         transform=transform,
         reason=(
             f"merged: acceptance index {agreement.index:.3f}, overlap "
-            f"{agreement.overlap * fine**2:.1f} m², score {best.score:.1f} m²{margin}"
+            f"{agreement.overlap * fine**2:.1f} m², {decision.reason}"
         ),
-        hypotheses=scored,
-        chosen=replace(best, map1_from_map2=transform),
+        hypotheses=candidates.hypotheses,
+        chosen=replace(decision.chosen, map1_from_map2=transform),
         fused=fused,
         agreement=agreement,
         psi=psi,
@@ -902,15 +829,3 @@ def _refine_at_input_resolution(
     transform = np.asarray(final.transform, dtype=np.float64)
     agreement = acceptance_index(f1, f2, transform, distances1=d1, distances2=d2)
     return transform, float(final.psi), agreement
-
-
-def relative_transform_error(
-    estimate: FloatArray, truth: FloatArray, pivot: FloatArray | None = None
-) -> tuple[float, float]:
-    """Translation error (m) and absolute rotation error (rad) of ``estimate`` against
-    ``truth`` (both ``map1_from_map2``): the translation of ``inverse(truth) ∘ estimate``
-    measured at ``pivot`` (a point of m2; default its frame's origin)."""
-    error = compose(inverse(truth), estimate)
-    point = np.zeros(2) if pivot is None else np.asarray(pivot, dtype=np.float64)
-    moved = transform_points(error, point[None, :])[0] - point
-    return float(np.hypot(*moved)), abs(wrap_scalar(float(error[2])))

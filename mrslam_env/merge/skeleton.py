@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from mrslam_env.gridmap import GridMap
+from mrslam_env.validation import check_fields
 
 BoolArray = NDArray[np.bool_]
 IntArray = NDArray[np.int64]
@@ -92,18 +93,16 @@ class SkeletonConfig:
     """Branches from an end to a junction shorter than this are pruned, m."""
 
     def __post_init__(self) -> None:
-        for name in (
-            "clearance",
-            "min_hole_area",
-            "smoothing_radius",
-            "min_component_area",
-            "min_spur_length",
-        ):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
-                raise ValueError(
-                    f"SkeletonConfig.{name} must be a finite number >= 0, got {value!r}"
-                )
+        check_fields(
+            self,
+            non_negative=(
+                "clearance",
+                "min_hole_area",
+                "smoothing_radius",
+                "min_component_area",
+                "min_spur_length",
+            ),
+        )
 
 
 @dataclass(frozen=True, slots=True)

@@ -30,6 +30,7 @@ from mrslam_env.geometry import compose, inverse, wrap_angle
 from mrslam_env.gridmap import OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.merge.skeleton import SkeletonConfig, SkeletonGraph, free_space_graph
 from mrslam_env.slam.raycast import dda_start
+from mrslam_env.validation import check_fields, require
 
 FloatArray = NDArray[np.float64]
 
@@ -193,33 +194,31 @@ class VirtualRobotConfig:
 
     def __post_init__(self) -> None:
         name = type(self).__name__
-        for attr in ("n_beams", "max_runs"):
-            value = getattr(self, attr)
-            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
-                raise ValueError(f"{name}.{attr} must be an int >= 1, got {value!r}")
-        for attr in ("max_range", "step", "run_length"):
-            value = getattr(self, attr)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name}.{attr} must be a finite number > 0, got {value!r}")
-        for attr in (
+        check_fields(
+            self,
+            positive=("max_range", "step", "run_length"),
+            non_negative=(
+                "min_run_length",
+                "heading_smoothing",
+                "min_valid_beams",
+                "odometry_translation_noise",
+                "odometry_rotation_noise",
+            ),
+            counts=("n_beams", "max_runs"),
+        )
+        require(
+            name,
             "min_run_length",
-            "heading_smoothing",
-            "min_valid_beams",
-            "odometry_translation_noise",
-            "odometry_rotation_noise",
-        ):
-            value = getattr(self, attr)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name}.{attr} must be a finite number >= 0, got {value!r}")
-        if self.min_run_length > self.run_length:
-            raise ValueError(
-                f"{name}.min_run_length must be <= run_length ({self.run_length}), "
-                f"got {self.min_run_length!r}"
-            )
-        if self.min_valid_beams > 1:
-            raise ValueError(f"{name}.min_valid_beams must be <= 1, got {self.min_valid_beams!r}")
-        if not isinstance(self.skeleton, SkeletonConfig):
-            raise ValueError(f"{name}.skeleton must be a SkeletonConfig, got {self.skeleton!r}")
+            self.min_run_length,
+            self.min_run_length <= self.run_length,
+            f"<= run_length ({self.run_length})",
+        )
+        beams = self.min_valid_beams
+        require(name, "min_valid_beams", beams, beams <= 1, "<= 1")
+        skeleton = self.skeleton
+        require(
+            name, "skeleton", skeleton, isinstance(skeleton, SkeletonConfig), "a SkeletonConfig"
+        )
 
 
 @dataclass(frozen=True, slots=True)

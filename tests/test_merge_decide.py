@@ -1,0 +1,426 @@
+"""The decision step of the merge (:mod:`mrslam_env.merge.decide`) on hand-made candidates.
+
+- Each candidate check of :func:`judge` and each decision rule of :data:`RULES`, on
+  candidates that pass it and candidates that fail it, with the exact reason the CLI
+  prints and the rule's name in the :class:`Decision`.
+- The order in which the rules apply: a candidate set that several rules would refuse is
+  refused by the first of them.
+- :func:`decide` on no candidates, and an accepted decision's reason.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from mrslam_env.merge.decide import (
+    CANDIDATE_CHECKS,
+    RULES,
+    Candidates,
+    check_acceptance_index,
+    check_conflict_fraction,
+    check_overlap_area,
+    contradicted,
+    decide,
+    judge,
+    rule_confident_fit,
+    rule_correlation_covers_enough,
+    rule_has_candidates,
+    rule_small_overlap_fits_tightly,
+    rule_unambiguous,
+)
+from mrslam_env.merge.dissimilarity import Agreement
+from mrslam_env.merge.pipeline import MergeConfig, ScoredHypothesis
+
+RESOLUTION = 0.1  # m: one cell is 0.01 m²
+PIVOT = np.array([0.0, 0.0])
+CONFIG = MergeConfig()
+
+
+def _agreement(
+    *,
+    agree: int = 2000,
+    disagree: int = 20,
+    conflicts: int = 0,
+    overlap_fraction: float = 0.5,
+) -> Agreement:
+    overlap = agree + disagree
+    return Agreement(
+        agree=agree,
+        disagree=disagree,
+        conflicts=conflicts,
+        overlap=overlap,
+        known1=4000,
+        known2=4000,
+        index=agree / overlap,
+        overlap_fraction=overlap_fraction,
+        conflict_fraction=conflicts / overlap,
+    )
+
+
+def _candidate(
+    x: float,
+    theta: float = 0.0,
+    *,
+    score: float = 100.0,
+    confident: bool = True,
+    psi: float = 0.3,
+    conflicts: int = 0,
+    length: float = 0.0,
+    agreement: Agreement | None = None,
+    proposed_by: str = "virtual robot",
+) -> ScoredHypothesis:
+    transform = np.array([x, 0.0, theta])
+    return ScoredHypothesis(
+        map1_from_map2=transform,
+        initial=transform,
+        support=0.3,
+        votes=2,
+        psi=psi,
+        agreement=agreement if agreement is not None else _agreement(conflicts=conflicts),
+        score=score,
+        confident=confident,
+        conflict_length=length,
+        proposed_by=proposed_by,
+    )
+
+
+def _candidates(
+    *hypotheses: ScoredHypothesis,
+    reasons: list[str] | None = None,
+    resolution: float = RESOLUTION,
+) -> Candidates:
+    return Candidates(
+        hypotheses=list(hypotheses),
+        reasons=reasons if reasons is not None else ["" for _ in hypotheses],
+        pivot=PIVOT,
+        resolution=resolution,
+    )
+
+
+def _refused_by(candidates: Candidates, config: MergeConfig = CONFIG) -> tuple[str | None, str]:
+    decision = decide(candidates, config)
+    assert (decision.chosen is None) == (decision.rule is not None)
+    return decision.rule, decision.reason
+
+
+# -- the candidate checks (judge) ---------------------------------------------------------------
+
+
+def test_judge_scores_agreement_minus_weighted_conflicts_in_square_metres() -> None:
+    agreement = _agreement(agree=2000, conflicts=3)
+    score, _, _ = judge(agreement, RESOLUTION, CONFIG)
+    assert score == pytest.approx((2000 - 10.0 * 3) * 0.01)
+
+
+def test_judge_accepts_a_candidate_that_passes_every_check() -> None:
+    score, confident, why = judge(_agreement(), RESOLUTION, CONFIG)
+    assert confident and why == ""
+    assert score == pytest.approx(20.0)
+
+
+@pytest.mark.parametrize(
+    ("agreement", "check", "why"),
+    [
+        # 299 cells of 0.01 m² overlap: under 3 m².
+        (_agreement(agree=299, disagree=0), check_overlap_area, "overlap 3.0 m² < 3.0 m²"),
+        (
+            _agreement(agree=1790, disagree=210),
+            check_acceptance_index,
+            "acceptance index 0.895 < 0.9",
+        ),
+        (_agreement(conflicts=21), check_conflict_fraction, "conflicts 0.010 > 0.01"),
+    ],
+    ids=["overlap-area", "acceptance-index", "conflict-fraction"],
+)
+def test_each_candidate_check_fails_with_its_reason(
+    agreement: Agreement, check: Callable[[Agreement, float, MergeConfig], str | None], why: str
+) -> None:
+    assert check in CANDIDATE_CHECKS
+    assert check(agreement, RESOLUTION, CONFIG) == why
+    _, confident, reason = judge(agreement, RESOLUTION, CONFIG)
+    assert not confident and reason == why
+
+
+@pytest.mark.parametrize(
+    "agreement",
+    [
+        _agreement(agree=300, disagree=0),  # exactly 3 m² (0.01 m² per cell)
+        _agreement(agree=1800, disagree=200),  # index exactly 0.9
+        _agreement(conflicts=20),  # conflicts 20 / 2020 < 0.01
+    ],
+    ids=["overlap-area", "acceptance-index", "conflict-fraction"],
+)
+def test_candidate_checks_pass_at_their_thresholds(agreement: Agreement) -> None:
+    assert [check(agreement, RESOLUTION, CONFIG) for check in CANDIDATE_CHECKS] == [None] * 3
+
+
+def test_the_overlap_check_reads_the_resolution() -> None:
+    small = _agreement(agree=200, disagree=0)  # 2 m² at 0.1 m, 8 m² at 0.2 m
+    assert check_overlap_area(small, RESOLUTION, CONFIG) is not None
+    assert check_overlap_area(small, 0.2, CONFIG) is None
+
+
+def test_judge_reports_the_first_failing_check() -> None:
+    # Too small, too disagreeing and too contradicted: the overlap check comes first.
+    everything_wrong = _agreement(agree=150, disagree=50, conflicts=10)
+    assert judge(everything_wrong, RESOLUTION, CONFIG)[2].startswith("overlap ")
+    # Enough overlap: the acceptance index comes before the conflicts.
+    disagreeing = _agreement(agree=1500, disagree=500, conflicts=100)
+    assert judge(disagreeing, RESOLUTION, CONFIG)[2].startswith("acceptance index ")
+
+
+# -- decide on nothing, and an accepted decision -----------------------------------------------
+
+
+def test_decide_on_no_candidates_refuses_for_lack_of_structure() -> None:
+    decision = decide(_candidates(), CONFIG)
+    assert decision.chosen is None
+    assert decision.rule == "rule_has_candidates"
+    assert decision.reason == (
+        "no confident merge: the virtual robot found no hypothesis (too little structure)"
+    )
+
+
+def test_rule_has_candidates_lets_any_candidate_through() -> None:
+    unsure = _candidate(0.0, confident=False)
+    assert rule_has_candidates(_candidates(unsure, reasons=["x"]), CONFIG) is None
+
+
+def test_a_lone_confident_candidate_is_accepted_with_its_score() -> None:
+    best = _candidate(0.0, score=44.83)
+    decision = decide(_candidates(best), CONFIG)
+    assert decision.chosen is best
+    assert decision.rule is None
+    assert decision.reason == "score 44.8 m²"
+
+
+def test_an_accepted_decision_names_the_next_different_confident_candidate() -> None:
+    best = _candidate(0.0, score=100.0)
+    duplicate = _candidate(0.2, score=90.0)  # 0.2 m at the pivot: the same answer
+    unsure = _candidate(5.0, score=80.0, confident=False)
+    weak = _candidate(5.0, score=20.0)  # different, confident, under a quarter of the best
+    decision = decide(_candidates(best, duplicate, weak, unsure, reasons=["", "", "", "x"]), CONFIG)
+    assert decision.chosen is best
+    assert decision.reason == "score 100.0 m², next confident candidate 20.0 m²"
+    # An unconfident different candidate is no runner-up.
+    alone = decide(_candidates(best, duplicate, unsure, reasons=["", "", "x"]), CONFIG)
+    assert alone.chosen is best and alone.reason == "score 100.0 m²"
+
+
+def test_decide_leaves_its_input_alone() -> None:
+    best, rival = _candidate(0.0), _candidate(5.0, score=60.0)
+    candidates = _candidates(best, rival)
+    first, second = decide(candidates, CONFIG), decide(candidates, CONFIG)
+    assert (first.rule, first.reason) == (second.rule, second.reason)
+    assert candidates.hypotheses == [best, rival] and candidates.reasons == ["", ""]
+
+
+def test_candidates_need_one_reason_per_hypothesis() -> None:
+    with pytest.raises(ValueError, match="1 reasons for 2 hypotheses"):
+        _candidates(_candidate(0.0), _candidate(5.0), reasons=[""])
+
+
+# -- rule_confident_fit ------------------------------------------------------------------------
+
+
+def test_rule_confident_fit_passes_a_confident_best() -> None:
+    assert rule_confident_fit(_candidates(_candidate(0.0)), CONFIG) is None
+
+
+@pytest.mark.parametrize(
+    "why",
+    ["acceptance index 0.880 < 0.9", "refuted: a 2.3 m wall of one map on open floor"],
+)
+def test_rule_confident_fit_refuses_with_the_best_candidates_own_reason(why: str) -> None:
+    best = _candidate(0.0, confident=False)
+    other = _candidate(5.0, confident=False)
+    candidates = _candidates(best, other, reasons=[why, "conflicts 0.039 > 0.01"])
+    assert rule_confident_fit(candidates, CONFIG) == f"best hypothesis fails: {why}"
+    assert _refused_by(candidates) == (
+        "rule_confident_fit",
+        f"no confident merge: best hypothesis fails: {why}",
+    )
+
+
+# -- rule_unambiguous and contradicted ---------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("score", "refused"), [(25.0, True), (24.9, False)], ids=["at-ratio", "below-ratio"]
+)
+def test_rule_unambiguous_refuses_a_clean_rival_from_a_quarter_of_the_best(
+    score: float, refused: bool
+) -> None:
+    candidates = _candidates(_candidate(0.0, score=100.0), _candidate(6.0, score=score))
+    why = rule_unambiguous(candidates, CONFIG)
+    if refused:
+        assert why == f"ambiguous: two different transforms fit (scores 100.0 and {score:.1f} m²)"
+        assert _refused_by(candidates) == ("rule_unambiguous", f"no confident merge: {why}")
+    else:
+        assert why is None
+
+
+def test_a_rotated_rival_in_the_same_place_is_a_different_answer() -> None:
+    turned = _candidate(0.0, math.radians(10.0), score=50.0)  # > 8 degrees off
+    assert rule_unambiguous(_candidates(_candidate(0.0), turned), CONFIG) is not None
+    close = _candidate(0.0, math.radians(6.0), score=50.0)  # < 8 degrees: the same answer
+    assert rule_unambiguous(_candidates(_candidate(0.0), close), CONFIG) is None
+
+
+def test_rule_unambiguous_ignores_duplicates_and_unconfident_rivals() -> None:
+    best = _candidate(0.0, score=100.0)
+    duplicate = _candidate(0.3, score=99.0)  # 0.3 m at the pivot: the same answer
+    unsure = _candidate(6.0, score=90.0, confident=False)
+    candidates = _candidates(best, duplicate, unsure, reasons=["", "", "x"])
+    assert rule_unambiguous(candidates, CONFIG) is None
+
+
+@pytest.mark.parametrize(
+    ("conflicts", "length", "expected"),
+    [
+        (9, 0.3, True),  # 9 >= 3 x (2 + 1), a 0.3 m group: both at their thresholds
+        (8, 1.0, False),  # one conflict short
+        (9, 0.29, False),  # the group is too short
+    ],
+    ids=["at-thresholds", "few-conflicts", "short-group"],
+)
+def test_contradicted_needs_many_conflicts_in_a_long_group(
+    conflicts: int, length: float, expected: bool
+) -> None:
+    best = _candidate(0.0, conflicts=2)
+    rival = _candidate(6.0, conflicts=conflicts, length=length)
+    assert contradicted(best, rival, CONFIG) is expected
+
+
+@pytest.mark.parametrize(
+    ("score", "refused"), [(60.0, True), (59.0, False)], ids=["at-ratio", "below-ratio"]
+)
+def test_a_contradicted_rival_is_ambiguous_only_from_its_higher_ratio(
+    score: float, refused: bool
+) -> None:
+    best = _candidate(0.0, score=100.0, conflicts=2)
+    rival = _candidate(6.0, math.pi, score=score, conflicts=9, length=0.5)
+    why = rule_unambiguous(_candidates(best, rival), CONFIG)
+    assert (why is not None) is refused
+
+
+# -- rule_correlation_covers_enough ------------------------------------------------------------
+
+
+def _correlation_best(overlap_fraction: float) -> ScoredHypothesis:
+    agreement = _agreement(overlap_fraction=overlap_fraction)
+    return _candidate(0.0, agreement=agreement, proposed_by="correlation")
+
+
+def test_a_correlation_only_best_covering_too_little_is_refused() -> None:
+    candidates = _candidates(_correlation_best(0.15))
+    why = rule_correlation_covers_enough(candidates, CONFIG)
+    assert why == (
+        "only the wall correlation proposes the best transform and it overlaps "
+        "15% of the smaller map (< 20%)"
+    )
+    assert _refused_by(candidates) == (
+        "rule_correlation_covers_enough",
+        f"no confident merge: {why}",
+    )
+
+
+def test_a_correlation_only_best_covering_enough_passes() -> None:
+    assert rule_correlation_covers_enough(_candidates(_correlation_best(0.2)), CONFIG) is None
+
+
+def test_a_small_correlation_best_passes_when_the_virtual_robot_agrees() -> None:
+    agreeing = _candidate(0.1, score=90.0)  # the same answer, confident, virtual robot
+    candidates = _candidates(_correlation_best(0.15), agreeing)
+    assert rule_correlation_covers_enough(candidates, CONFIG) is None
+    # ... but not when that agreeing candidate is not confident,
+    unsure = replace(agreeing, confident=False)
+    assert rule_correlation_covers_enough(_candidates(_correlation_best(0.15), unsure), CONFIG)
+    # ... nor when it is another correlation placement; an aliasing-check placement counts.
+    other = replace(agreeing, proposed_by="correlation")
+    candidates = _candidates(_correlation_best(0.15), other)
+    assert rule_correlation_covers_enough(candidates, CONFIG) is not None
+    symmetry = replace(agreeing, proposed_by="symmetry")
+    candidates = _candidates(_correlation_best(0.15), symmetry)
+    assert rule_correlation_covers_enough(candidates, CONFIG) is None
+
+
+def test_a_virtual_robot_best_may_cover_little() -> None:
+    best = replace(_correlation_best(0.05), proposed_by="virtual robot")
+    assert rule_correlation_covers_enough(_candidates(best), CONFIG) is None
+
+
+# -- rule_small_overlap_fits_tightly ------------------------------------------------------------
+
+
+def _small(psi: float, overlap_cells: int = 700, overlap_fraction: float = 0.5) -> ScoredHypothesis:
+    agreement = _agreement(agree=overlap_cells, disagree=0, overlap_fraction=overlap_fraction)
+    return _candidate(0.0, psi=psi, agreement=agreement)
+
+
+def test_a_small_loose_overlap_is_refused() -> None:
+    candidates = _candidates(_small(psi=0.7))  # 7 m² at psi 0.7 cells
+    why = rule_small_overlap_fits_tightly(candidates, CONFIG)
+    assert why == "the best transform overlaps only 7.0 m² and fits loosely (psi 0.70 > 0.6 cells)"
+    assert _refused_by(candidates) == (
+        "rule_small_overlap_fits_tightly",
+        f"no confident merge: {why}",
+    )
+
+
+@pytest.mark.parametrize(
+    ("psi", "overlap_cells", "resolution"),
+    [
+        (0.6, 700, RESOLUTION),  # tight enough: psi at the threshold
+        (1.2, 900, RESOLUTION),  # 9 m²: not small, may fit loosely
+        (1.2, 700, 0.2),  # 700 cells of 0.04 m²: 28 m²
+    ],
+    ids=["tight", "not-small", "coarser-cells"],
+)
+def test_a_tight_or_large_overlap_passes(psi: float, overlap_cells: int, resolution: float) -> None:
+    candidates = _candidates(_small(psi, overlap_cells), resolution=resolution)
+    assert rule_small_overlap_fits_tightly(candidates, CONFIG) is None
+
+
+def test_the_small_overlap_rule_reads_its_two_thresholds() -> None:
+    candidates = _candidates(_small(psi=0.7))
+    assert rule_small_overlap_fits_tightly(candidates, MergeConfig(small_overlap_area=6.0)) is None
+    assert (
+        rule_small_overlap_fits_tightly(candidates, MergeConfig(small_overlap_max_psi=0.8)) is None
+    )
+
+
+# -- the order of the rules -------------------------------------------------------------------
+
+
+def test_the_rules_apply_in_their_documented_order() -> None:
+    assert [rule.__name__ for rule in RULES] == [
+        "rule_has_candidates",
+        "rule_confident_fit",
+        "rule_unambiguous",
+        "rule_correlation_covers_enough",
+        "rule_small_overlap_fits_tightly",
+    ]
+
+
+def test_an_unconfident_best_is_refused_before_ambiguity_is_looked_at() -> None:
+    # Ranked wrongly on purpose: an unconfident best with a confident rival.
+    best = _candidate(0.0, confident=False)
+    rival = _candidate(6.0, score=90.0)
+    rule, _ = _refused_by(_candidates(best, rival, reasons=["overlap 2.0 m² < 3.0 m²", ""]))
+    assert rule == "rule_confident_fit"
+
+
+def test_ambiguity_is_refused_before_the_correlation_and_small_overlap_rules() -> None:
+    # Correlation-only, 7 m² and loose: three rules would refuse; ambiguity comes first.
+    best = replace(_small(psi=0.9, overlap_fraction=0.1), proposed_by="correlation")
+    rival = _candidate(6.0, score=90.0)
+    assert _refused_by(_candidates(best, rival))[0] == "rule_unambiguous"
+    assert _refused_by(_candidates(best))[0] == "rule_correlation_covers_enough"
+    virtual = replace(best, proposed_by="virtual robot")
+    assert _refused_by(_candidates(virtual))[0] == "rule_small_overlap_fits_tightly"
