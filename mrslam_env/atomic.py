@@ -24,7 +24,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     """
     target = Path(path)
     descriptor, name = tempfile.mkstemp(
-        prefix=f".{target.stem}.", suffix=f"{target.suffix}.part", dir=target.parent
+        prefix=f".{target.stem}.", suffix=f".part{target.suffix}", dir=target.parent
     )
     os.close(descriptor)
     temporary = Path(name)

@@ -32,6 +32,7 @@ EXIT_FAILURE = 1
 EXIT_BAD_INPUT = 2
 EXIT_NO_MERGE = 3
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report it
+EXIT_TERMINATED = 143  # 128 + SIGTERM
 
 
 def _seed(text: str) -> int:
@@ -71,7 +72,16 @@ def _build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--out", type=Path, default=Path("runs"), help="parent folder of the run folder"
     )
-    run.add_argument("--name", help="run folder name (default <scenario>-seed<seed>)")
+    run.add_argument(
+        "--name",
+        help="run folder name (default <scenario>-seed<seed>); a used, non-empty folder is "
+        "never mixed: the run goes to <name>-2, <name>-3, ... unless --overwrite",
+    )
+    run.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="reuse the run folder, deleting the earlier run's outputs in it first",
+    )
     run.add_argument("--no-record", action="store_true", help="do not write recording.rrd")
     run.add_argument(
         "--independent",
@@ -160,7 +170,14 @@ def _build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from scenarios.experiment import RunConfig, run_experiment
+    import signal
+
+    from scenarios.experiment import RunConfig, RunInterrupted, run_experiment
+
+    def terminated(signum: int, frame: object) -> None:
+        raise RunInterrupted(signum)
+
+    signal.signal(signal.SIGTERM, terminated)  # ends the run as Ctrl-C does
 
     config = RunConfig(
         scenario=args.scenario,
@@ -173,6 +190,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         interaction=not args.independent,
         comm=not args.no_comm,
         progress=not args.json,
+        overwrite=args.overwrite,
     )
     report = run_experiment(config)
     if args.json:
@@ -193,6 +211,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
             f"in {report['wall_time']:.1f} s; {merged}; coverage {coverage:.0%}"
         )
         print(f"outputs in {report['outputs']['run_dir']}")
+    if not report["complete"]:
+        print(
+            f"mrslam: interrupted by {report['interrupted']} after {report['steps']} steps; "
+            f"partial outputs in {report['outputs']['run_dir']}",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED if report["interrupted"] == "SIGINT" else EXIT_TERMINATED
     return 0
 
 
@@ -421,9 +446,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     }
     try:
         return handlers[args.command](args)
-    except KeyboardInterrupt:
-        print("mrslam: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as stop:
+        name = getattr(stop, "signal_name", "SIGINT")
+        print(f"mrslam: interrupted by {name}", file=sys.stderr)
+        return EXIT_INTERRUPTED if name == "SIGINT" else EXIT_TERMINATED
     except (ValueError, OSError, MemoryError) as error:
         if args.debug:
             raise

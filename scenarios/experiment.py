@@ -11,13 +11,25 @@ ground truth, which the robots never see) or after ``max_steps``.
 Outputs in ``<out>/<name>/``: ``recording.rrd``, ``report.json``, ``robot_0.yaml``/``.pgm``
 and ``robot_1.yaml``/``.pgm`` (each robot's map in its own frame), ``merged.yaml``/``.pgm``
 (in robot 0's frame, when merged) and ``figure.png`` (ground truth, m1, m2, merge with the
-preliminary estimate, merge after refinement).
+preliminary estimate, merge after refinement). Every file is written under a temporary
+name and renamed into place.
+
+**The run folder.** A run never mixes its outputs with another's: when ``<out>/<name>``
+exists and is not empty, the run goes to the first free ``<name>-2``, ``<name>-3``, …;
+with ``overwrite=True`` (``--overwrite``) it reuses ``<name>`` after deleting the
+outputs of the earlier run there (the files named above; nothing else is touched).
+
+**Interrupted runs.** Ctrl-C (SIGINT, and SIGTERM where the CLI turns it into
+:class:`RunInterrupted`) stops the stepping loop; the outputs of the steps done are still
+written, with ``"complete": false`` and ``"interrupted": "SIGINT"`` in ``report.json``,
+and the recording is closed so that it verifies.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import signal
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -29,6 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.team import TeamConfig, TeamCoordinator, TeamState
+from mrslam_env.atomic import atomic_path, write_text_atomic
 from mrslam_env.config import CommConfig, EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
 from mrslam_env.evaluation import (
@@ -47,7 +60,47 @@ from mrslam_env.sim.mapworld import world_from_map
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
 from scenarios.figure import summary_figure
 
-__all__ = ["RunConfig", "resolve_world", "run_experiment"]
+__all__ = ["RunConfig", "RunInterrupted", "prepare_run_dir", "resolve_world", "run_experiment"]
+
+OUTPUT_FILES = (
+    "recording.rrd",
+    "report.json",
+    "figure.png",
+    "merged.yaml",
+    "merged.pgm",
+)
+"""A run's outputs besides the robots' maps (``robot_<i>.yaml`` / ``.pgm``)."""
+
+
+class RunInterrupted(KeyboardInterrupt):
+    """A run stopped by a signal: ``signal_name`` is e.g. ``"SIGTERM"``."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signal_name = signal.Signals(signum).name
+
+
+def prepare_run_dir(out: Path, name: str, *, overwrite: bool = False) -> Path:
+    """The folder a run writes to (the module docstring's run-folder convention).
+
+    ``<out>/<name>`` when it is new or empty; with ``overwrite``, the same folder with an
+    earlier run's outputs deleted; otherwise the first free ``<name>-2``, ``<name>-3``, ….
+    """
+    folder = Path(out) / name
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"run folder {folder} exists and is a file")
+    if folder.is_dir() and any(folder.iterdir()):
+        if overwrite:
+            for old in [*OUTPUT_FILES, *(p.name for p in folder.glob("robot_*.[yp][ag]m*"))]:
+                (folder / old).unlink(missing_ok=True)
+        else:
+            index = 2
+            while (Path(out) / f"{name}-{index}").exists():
+                index += 1
+            folder = Path(out) / f"{name}-{index}"
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
 
 FloatArray = NDArray[np.float64]
 
@@ -84,6 +137,9 @@ class RunConfig:
     coverage_every: int = 20
     """Steps between coverage evaluations."""
     progress: bool = True
+    overwrite: bool = False
+    """Reuse ``<out>/<name>`` (deleting the earlier run's outputs) instead of the next free
+    numbered folder."""
 
     def __post_init__(self) -> None:
         if self.max_steps < 1:
@@ -158,8 +214,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
     """Run one experiment, write its outputs, return the report (also ``report.json``)."""
     world = resolve_world(config.scenario, config.map_path, config.seed)
     name = config.name or f"{world.name.replace(':', '_')}-seed{config.seed}"
-    run_dir = Path(config.out) / name
-    run_dir.mkdir(parents=True, exist_ok=True)
+    run_dir = prepare_run_dir(Path(config.out), name, overwrite=config.overwrite)
     comm = CommConfig() if config.comm else CommConfig(comm_range=1e-9)
     env_config = EnvConfig(max_cycles=config.max_steps, comm=comm)
     env = MultiRobotSlamEnv(scenario=world, seed=config.seed, config=env_config)
@@ -171,8 +226,9 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
     world_from_maps = [env.simulator.starts[i].copy() for i in range(len(agents))]
     true_transform = compose(inverse(world_from_maps[0]), world_from_maps[1])
     evaluator = CoverageEvaluator(world, env.simulator.starts)
+    recording_part = run_dir / ".recording.part.rrd"  # renamed once closed
     recorder = (
-        Recorder(run_dir / "recording.rrd", n_robots=len(agents), map_every=config.map_every)
+        Recorder(recording_part, n_robots=len(agents), map_every=config.map_every)
         if config.record
         else None
     )
@@ -195,45 +251,51 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
     coverage_curve: list[tuple[int, float]] = []
     t90: float | None = None
     steps = 0
+    interrupted: str | None = None
     started = time.perf_counter()
-    with _progress(config.max_steps, config.progress) as bar:
-        while env.agents:
-            actions = team.act([observations[a] for a in agents], maps)
-            observations, _rewards, _terms, _truncs, infos = env.step(
-                {agent: actions[i] for i, agent in enumerate(agents)}
-            )
-            steps += 1
-            bar.update(1)
-            for i, agent in enumerate(agents):
-                collisions[agent] += infos[agent]["collision"]
-                slam_poses[i].append(observations[agent]["pose"])
-                true_poses[i].append(infos[agent]["true_pose"])
-            if recorder is not None:
-                recorder.set_time(steps, steps * env_config.dt)
-                for decision in team.pop_decisions():
-                    recorder.log_event(decision.text)
-                    if "rendezvous" in decision.text or "hypothesis #" in decision.text:
-                        recorder.log_text("rendezvous/status", decision.text)
-                if team.state is not state:
-                    recorder.log_text("team/state", str(team.state))
-                _record_step(recorder, env, team, maps, observations, infos, config, logged_scans)
-                if recorder.map_due:
-                    for i, agent in enumerate(agents):
-                        recorder.log_scalar(f"ate/{agent}", ate(i))
-            else:
-                team.pop_decisions()
-            state = team.state
-            if steps % config.coverage_every == 0 or not env.agents:
-                covered = evaluator.coverage([maps(0), maps(1)], world_from_maps)
-                coverage_curve.append((steps, covered))
+    try:
+        with _progress(config.max_steps, config.progress) as bar:
+            while env.agents:
+                actions = team.act([observations[a] for a in agents], maps)
+                observations, _rewards, _terms, _truncs, infos = env.step(
+                    {agent: actions[i] for i, agent in enumerate(agents)}
+                )
+                steps += 1
+                bar.update(1)
+                for i, agent in enumerate(agents):
+                    collisions[agent] += infos[agent]["collision"]
+                    slam_poses[i].append(observations[agent]["pose"])
+                    true_poses[i].append(infos[agent]["true_pose"])
                 if recorder is not None:
-                    recorder.log_scalar("coverage/team", covered)
-                if t90 is None and covered >= 0.9:
-                    t90 = steps * env_config.dt
-                if covered >= config.target_coverage:
-                    break
-                if all(e.done for e in team.explorers):
-                    break
+                    recorder.set_time(steps, steps * env_config.dt)
+                    for decision in team.pop_decisions():
+                        recorder.log_event(decision.text)
+                        if "rendezvous" in decision.text or "hypothesis #" in decision.text:
+                            recorder.log_text("rendezvous/status", decision.text)
+                    if team.state is not state:
+                        recorder.log_text("team/state", str(team.state))
+                    _record_step(
+                        recorder, env, team, maps, observations, infos, config, logged_scans
+                    )
+                    if recorder.map_due:
+                        for i, agent in enumerate(agents):
+                            recorder.log_scalar(f"ate/{agent}", ate(i))
+                else:
+                    team.pop_decisions()
+                state = team.state
+                if steps % config.coverage_every == 0 or not env.agents:
+                    covered = evaluator.coverage([maps(0), maps(1)], world_from_maps)
+                    coverage_curve.append((steps, covered))
+                    if recorder is not None:
+                        recorder.log_scalar("coverage/team", covered)
+                    if t90 is None and covered >= 0.9:
+                        t90 = steps * env_config.dt
+                    if covered >= config.target_coverage:
+                        break
+                    if all(e.done for e in team.explorers):
+                        break
+    except KeyboardInterrupt as stop:  # Ctrl-C or a signal: keep what was done
+        interrupted = getattr(stop, "signal_name", "SIGINT")
     wall_time = time.perf_counter() - started
 
     own_maps = [maps(i) for i in range(len(agents))]
@@ -283,12 +345,12 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
         },
     }
     if config.figure:
-        outputs["figure"] = str(
-            summary_figure(
-                run_dir / "figure.png", truth, own_maps[0], own_maps[1], preliminary, merged
-            )
-        )
+        with atomic_path(run_dir / "figure.png") as figure:
+            summary_figure(figure, truth, own_maps[0], own_maps[1], preliminary, merged)
+        outputs["figure"] = str(run_dir / "figure.png")
     report: dict[str, Any] = {
+        "complete": interrupted is None,
+        "interrupted": interrupted,
         "scenario": world.name,
         "seed": config.seed,
         "steps": steps,
@@ -317,10 +379,12 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
     if recorder is not None:
         if merged is not None:
             recorder.log_grid("team/merged_map", merged)
-        recorder.log_event(f"run finished after {steps} steps, coverage {coverage['merged']:.1%}")
+        ending = "finished" if interrupted is None else f"interrupted ({interrupted})"
+        recorder.log_event(f"run {ending} after {steps} steps, coverage {coverage['merged']:.1%}")
         recorder.close()
+        recording_part.replace(run_dir / "recording.rrd")
         outputs["recording"] = str(run_dir / "recording.rrd")
-    (run_dir / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+    write_text_atomic(run_dir / "report.json", json.dumps(report, indent=2) + "\n")
     return report
 
 

@@ -82,7 +82,7 @@ def test_any_output_name_writes_the_yaml_and_pgm_pair(capsys, maps: Path, output
     merged = load_map(maps / "merged.yaml")
     assert (maps / "merged.pgm").read_bytes().startswith(b"P5")
     assert merged.shape[0] > 0 and "merged.yaml" in out
-    assert not list(maps.glob(".*part")), "a temporary file was left behind"
+    assert not list(maps.glob(".*part*")), "a temporary file was left behind"
 
 
 def test_an_output_folder_is_refused_and_nothing_is_written(capsys, maps: Path) -> None:

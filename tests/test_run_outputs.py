@@ -1,0 +1,107 @@
+"""`mrslam run`'s outputs: a used run folder is never mixed, interrupted runs keep what was
+done (report marked incomplete, recording closed), every file is written atomically."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+from pathlib import Path
+
+import pytest
+from test_recording import Recording
+
+from agents.team import TeamCoordinator
+from scenarios.cli import main
+from scenarios.experiment import OUTPUT_FILES, RunConfig, prepare_run_dir, run_experiment
+
+
+def test_a_new_or_empty_folder_is_used_as_named(tmp_path: Path) -> None:
+    assert prepare_run_dir(tmp_path, "a") == tmp_path / "a"
+    assert prepare_run_dir(tmp_path, "a") == tmp_path / "a"  # still empty
+
+
+def test_a_used_folder_is_never_mixed_the_run_goes_to_the_next_number(tmp_path: Path) -> None:
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "report.json").write_text("{}")
+    assert prepare_run_dir(tmp_path, "a") == tmp_path / "a-2"
+    (tmp_path / "a-2" / "report.json").write_text("{}")
+    assert prepare_run_dir(tmp_path, "a") == tmp_path / "a-3"
+    assert (tmp_path / "a" / "report.json").read_text() == "{}"
+
+
+def test_overwrite_deletes_the_earlier_outputs_and_nothing_else(tmp_path: Path) -> None:
+    folder = tmp_path / "a"
+    folder.mkdir()
+    for name in [*OUTPUT_FILES, "robot_0.yaml", "robot_0.pgm", "robot_1.yaml", "notes.txt"]:
+        (folder / name).write_text("old")
+    assert prepare_run_dir(tmp_path, "a", overwrite=True) == folder
+    assert sorted(p.name for p in folder.iterdir()) == ["notes.txt"]
+
+
+def test_a_file_in_the_way_is_refused(tmp_path: Path) -> None:
+    (tmp_path / "a").write_text("x")
+    with pytest.raises(ValueError, match="exists and is a file"):
+        prepare_run_dir(tmp_path, "a")
+
+
+def test_rerunning_with_the_same_seed_keeps_the_earlier_run(capsys, tmp_path: Path) -> None:
+    argv = ["run", "--max-steps", "20", "--no-record", "--out", str(tmp_path), "--json"]
+    assert main(argv) == 0
+    first = json.loads(capsys.readouterr().out)
+    assert main([*argv[:-1], "--no-comm", "--json"]) == 0
+    second = json.loads(capsys.readouterr().out)
+    assert Path(first["outputs"]["run_dir"]) == tmp_path / "office-seed0"
+    assert Path(second["outputs"]["run_dir"]) == tmp_path / "office-seed0-2"
+    kept = json.loads((tmp_path / "office-seed0" / "report.json").read_text())
+    assert kept["comm"] is True and kept["complete"] is True
+    assert not list(tmp_path.glob("*/.*part*")), "a temporary file was left behind"
+
+
+def interrupt_at(monkeypatch: pytest.MonkeyPatch, step: int, raise_it) -> None:
+    """Make the team's act() call ``raise_it`` at the given step."""
+    act = TeamCoordinator.act
+    calls = {"n": 0}
+
+    def counting(self, *args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == step:
+            raise_it()
+        return act(self, *args, **kwargs)
+
+    monkeypatch.setattr(TeamCoordinator, "act", counting)
+
+
+def test_ctrl_c_keeps_the_steps_done_and_closes_the_recording(monkeypatch, tmp_path: Path) -> None:
+    def ctrl_c() -> None:
+        raise KeyboardInterrupt
+
+    interrupt_at(monkeypatch, 16, ctrl_c)
+    report = run_experiment(RunConfig(out=tmp_path, name="r", max_steps=200, progress=False))
+    assert report["complete"] is False and report["interrupted"] == "SIGINT"
+    assert report["steps"] == 15
+    saved = json.loads((tmp_path / "r" / "report.json").read_text())
+    assert saved["complete"] is False and saved["steps"] == 15
+    recording = Recording(tmp_path / "r" / "recording.rrd")  # a closed, readable file
+    events = " ".join(str(v) for v in recording.column("/events", "TextLog:text"))
+    assert "interrupted (SIGINT) after 15 steps" in events
+    assert not (tmp_path / "r" / ".recording.part.rrd").exists()
+    assert (tmp_path / "r" / "robot_0.yaml").exists() and (tmp_path / "r" / "figure.png").exists()
+
+
+@pytest.mark.parametrize(("signum", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_ends_the_run_in_one_line_with_its_exit_status(
+    capsys, monkeypatch, tmp_path: Path, signum: int, status: int
+) -> None:
+    interrupt_at(monkeypatch, 11, lambda: os.kill(os.getpid(), signum))
+    previous = signal.getsignal(signal.SIGTERM)
+    try:
+        code = main(["run", "--max-steps", "100", "--no-record", "--out", str(tmp_path)])
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    err = capsys.readouterr().err
+    assert code == status
+    name = signal.Signals(signum).name
+    assert f"interrupted by {name} after 10 steps" in err and err.count("\n") == 1, err
+    report = json.loads((tmp_path / "office-seed0" / "report.json").read_text())
+    assert report["complete"] is False and report["interrupted"] == name
