@@ -6,6 +6,7 @@
 ``mrslam bench sim``           simulator speed, side by side with IR-SIM
 ``mrslam bench slam``          onboard SLAM accuracy (ATE, map agreement) and speed
 ``mrslam bench explore``       time to 90 % coverage, coordinated against independent robots
+``mrslam bench soak``          one long run with SLAM and the team: steps/s and memory
 ``mrslam bench merge``         map merging: our pipeline against the random walk alone and
                                the ROS map_merge feature baseline, on simulated map pairs
 
@@ -140,6 +141,14 @@ def _build_parser() -> argparse.ArgumentParser:
     explore.add_argument("--max-steps", type=int, default=4000, help="per run (default 4000)")
     explore.add_argument("--jobs", type=int, default=1, help="runs at a time (default 1)")
     explore.add_argument("--json", action="store_true")
+    soak = kinds.add_parser(
+        "soak", help="one long run with SLAM and the team: steps/s and memory over time"
+    )
+    soak.add_argument("--scenario", default="office")
+    soak.add_argument("--steps", type=int, default=100_000, help="env steps (default 1e5)")
+    soak.add_argument("--every", type=int, default=10_000, help="steps between rows")
+    soak.add_argument("--seed", type=_seed, default=0)
+    soak.add_argument("--json", action="store_true")
     merge = kinds.add_parser(
         "merge", help="map merging: success, wrong answers, refusals and time per method"
     )
@@ -302,6 +311,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         return _cmd_bench_merge(args)
     if args.bench == "explore":
         return _cmd_bench_explore(args)
+    if args.bench == "soak":
+        return _cmd_bench_soak(args)
     from mrslam_env.registry import available_scenarios, build_world
     from scenarios.bench.sim import bench_sim
 
@@ -339,6 +350,24 @@ def _cmd_bench_slam(args: argparse.Namespace) -> int:
     warm_up()  # compile/load the numba kernels before anything is timed
     rows = run_slam_benchmark(args.scenarios or DEFAULT_SCENARIOS, args.steps, args.seed)
     print(json.dumps(rows, indent=2) if args.json else format_slam_table(rows))
+    return 0
+
+
+def _cmd_bench_soak(args: argparse.Namespace) -> int:
+    from scenarios.bench.soak import format_soak_table, run_soak
+
+    if args.steps < 1 or args.every < 1:
+        raise ValueError("--steps and --every must be >= 1")
+
+    def progress(row: dict[str, object]) -> None:
+        print(
+            f"step {row['step']}: {row['steps_per_s']} steps/s, RSS {row['rss_mb']} MB",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    rows = run_soak(args.scenario, args.steps, args.every, args.seed, progress=progress)
+    print(json.dumps(rows, indent=2) if args.json else format_soak_table(rows))
     return 0
 
 

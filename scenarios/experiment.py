@@ -159,7 +159,7 @@ def resolve_world(scenario: str, map_path: Path | None, seed: int = 0) -> WorldS
     return world_from_map(grid, name=f"map:{Path(map_path).name}", rng=np.random.default_rng(seed))
 
 
-class _MapCache:
+class MapCache:
     """Each robot's own map, rebuilt only when its SLAM integrated a new scan."""
 
     def __init__(self, env: MultiRobotSlamEnv) -> None:
@@ -221,7 +221,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
     observations, infos = env.reset()
     agents = list(env.possible_agents)
     team = build_team(config, env.config)
-    maps = _MapCache(env)
+    maps = MapCache(env)
     # Robot i's map frame is its start pose: how its SLAM and the merge are judged.
     world_from_maps = [env.simulator.starts[i].copy() for i in range(len(agents))]
     true_transform = compose(inverse(world_from_maps[0]), world_from_maps[1])
@@ -392,7 +392,7 @@ def _record_step(
     recorder: Recorder,
     env: MultiRobotSlamEnv,
     team: TeamCoordinator,
-    maps: _MapCache,
+    maps: MapCache,
     observations: dict[str, Any],
     infos: dict[str, Any],
     config: RunConfig,

@@ -20,7 +20,7 @@ from mrslam_env.env import MultiRobotSlamEnv
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.merge.pipeline import MergeConfig
-from scenarios.experiment import _MapCache
+from scenarios.experiment import MapCache
 
 # Both robots in the office corridor (y 7..9), 5 m apart, facing each other: in comm
 # range, in each other's sight once they move.
@@ -33,7 +33,7 @@ def verify(hypothesis: np.ndarray, steps: int = 600) -> tuple[TeamCoordinator, l
     env = MultiRobotSlamEnv(scenario="office", seed=0, config=EnvConfig(starts=STARTS))
     observations, _ = env.reset()
     agents = env.possible_agents
-    maps = _MapCache(env)
+    maps = MapCache(env)
     team = TeamCoordinator(TeamConfig(interaction=True), rng=np.random.default_rng(0))
     # The hypothesis under test is injected as if the merge had proposed it.
     team.hypotheses = [hypothesis]
@@ -79,7 +79,7 @@ def test_without_interaction_the_robots_only_explore() -> None:
     env = MultiRobotSlamEnv(scenario="office", seed=0, config=EnvConfig(starts=STARTS))
     observations, _ = env.reset()
     agents = env.possible_agents
-    maps = _MapCache(env)
+    maps = MapCache(env)
     team = TeamCoordinator(TeamConfig(interaction=False), rng=np.random.default_rng(0))
     link_steps = 0
     for _ in range(200):
@@ -107,7 +107,7 @@ def test_a_hypothesis_that_puts_the_robots_in_sight_is_settled_where_they_stand(
         env = MultiRobotSlamEnv(scenario="office", seed=0, config=EnvConfig(starts=starts))
         observations, _ = env.reset()
         agents = env.possible_agents
-        maps = _MapCache(env)
+        maps = MapCache(env)
         team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0))
         team._retry_area = np.inf  # no merge of its own: the hypothesis is injected
         team.act([observations[a] for a in agents], maps)  # sees the link and the poses

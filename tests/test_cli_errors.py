@@ -4,6 +4,7 @@ mixes outputs (the reliability issue's cases, each reproduced)."""
 from __future__ import annotations
 
 import hashlib
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -171,3 +172,12 @@ def test_usage_errors_in_a_real_process_are_one_line(tmp_path: Path) -> None:
     )
     assert done.returncode == 2 and done.stdout == ""
     assert done.stderr.count("\n") == 1 and "--seed" in done.stderr
+
+
+def test_bench_soak_reports_speed_and_memory_per_stretch(capsys) -> None:
+    status, out, _ = run_cli(
+        capsys, "bench", "soak", "--steps", "30", "--every", "20", "--scenario", "maze", "--json"
+    )
+    rows = json.loads(out)
+    assert status == 0 and [r["step"] for r in rows] == [20, 30]
+    assert all(r["steps_per_s"] > 0 and r["rss_mb"] > 10 and r["known_m2"] > 0 for r in rows)
