@@ -23,6 +23,7 @@ from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.recording import (
     Recorder,
     grid_corner_pose,
+    occupancy_classes,
     occupancy_image,
     scan_hits_world,
 )
@@ -87,9 +88,13 @@ class Recording:
         """The component values logged on ``entity`` at ``step`` (one list per row)."""
         rows: list[Any] = []
         for batch in self.batches(entity, static=False):
+            if column not in batch.schema.names:  # e.g. a Clear's chunk
+                continue
             steps = batch.column("step").to_pylist()
             values = batch.column(column).to_pylist()
-            rows.extend(v for s, v in zip(steps, values, strict=True) if s == step)
+            rows.extend(
+                v for s, v in zip(steps, values, strict=True) if s == step and v is not None
+            )
         return rows
 
     def static_value(self, entity: str, column: str) -> Any:
@@ -152,11 +157,11 @@ def test_timelines_are_step_and_sim_time(recording: Recording) -> None:
     assert temporal
     # Wall-clock log_time is off: a recording depends on the simulation only.
     assert all(set(c.timeline_names) == {"step", "sim_time"} for c in temporal)
-    batch = next(recording.batches("/metrics/coverage"))
+    batch = next(recording.batches("/metrics/coverage", static=False))
     assert pa.types.is_integer(batch.schema.field("step").type)
     assert pa.types.is_duration(batch.schema.field("sim_time").type)
-    steps = recording.column("/metrics/coverage", "step")
-    times = recording.column("/metrics/coverage", "sim_time")
+    steps = recording.column("/metrics/coverage", "step", static=False)
+    times = recording.column("/metrics/coverage", "sim_time", static=False)
     assert steps == list(range(N_STEPS))
     np.testing.assert_allclose([t.total_seconds() for t in times], np.arange(N_STEPS) * DT)
 
@@ -173,14 +178,22 @@ def test_scan_at_step_3_has_the_hits_of_that_scan(recording: Recording) -> None:
         assert len(row) == expected_hits(step)
 
 
-def test_true_pose_has_arrow_and_footprint(recording: Recording) -> None:
-    (origin,) = recording.at_step("/world/robot_1/true_pose", "Arrows2D:origins", 2)
-    (vector,) = recording.at_step("/world/robot_1/true_pose", "Arrows2D:vectors", 2)
-    (half,) = recording.at_step("/world/robot_1/true_pose", "Ellipses2D:half_sizes", 2)
+def test_true_pose_has_disc_arrow_and_footprint(recording: Recording) -> None:
+    entity = "/world/robot_1/true_pose"
+    (centre,) = recording.at_step(entity, "Points2D:positions", 2)
+    (radius,) = recording.at_step(entity, "Points2D:radii", 2)
+    (label,) = recording.at_step(entity, "Points2D:labels", 2)
+    (origin,) = recording.at_step(entity, "Arrows2D:origins", 2)
+    (vector,) = recording.at_step(entity, "Arrows2D:vectors", 2)
+    (half,) = recording.at_step(entity, "Ellipses2D:half_sizes", 2)
     pose = true_pose(1, 2)
+    # The footprint at its true size (m): a disc, its outline, a heading arrow twice as long.
+    np.testing.assert_allclose(centre[0], pose[:2], atol=1e-6)
+    assert radius == [pytest.approx(0.2)]
+    assert label == ["robot_1"]
     np.testing.assert_allclose(origin[0], pose[:2], atol=1e-6)
     np.testing.assert_allclose(
-        vector[0], 0.2 * np.array([np.cos(pose[2]), np.sin(pose[2])]), atol=1e-6
+        vector[0], 0.4 * np.array([np.cos(pose[2]), np.sin(pose[2])]), atol=1e-6
     )
     np.testing.assert_allclose(half[0], [0.2, 0.2], atol=1e-6)
 
@@ -191,17 +204,20 @@ def test_ground_truth_is_static_and_complete(
     assert all(c.is_static for c in recording.chunks["/world/ground_truth"])
     assert all(c.is_static for c in recording.chunks["/world/walls"])
     entity = "/world/ground_truth"
-    fmt = recording.static_value(entity, "GridMap:format")[0]
+    fmt = recording.static_value(entity, "SegmentationImage:format")[0]
     rows, cols = ground_truth.shape
     assert (fmt["height"], fmt["width"]) == (rows, cols)
-    data = np.array(recording.static_value(entity, "GridMap:data")[0], dtype=np.uint8)
-    # Image row 0 is the top: flipping back gives our row 0 = lowest y.
-    cells = data.reshape(rows, cols)[::-1]
-    np.testing.assert_array_equal(cells == 0, ground_truth.occupied)
-    np.testing.assert_array_equal(cells == 254, ground_truth.free)
-    assert recording.static_value(entity, "GridMap:cell_size")[0] == pytest.approx(0.1)
+    data = np.array(recording.static_value(entity, "SegmentationImage:buffer")[0], dtype=np.uint8)
+    # Image row 0 is the grid's row 0 (lowest y): the root's y-up turn draws it at the bottom.
+    classes = data.reshape(rows, cols)
+    np.testing.assert_array_equal(classes == 2, ground_truth.occupied)
+    np.testing.assert_array_equal(classes == 1, ground_truth.free)
     np.testing.assert_allclose(
-        recording.static_value(entity, "GridMap:translation")[0], [*ground_truth.origin, 0.0]
+        recording.static_value(entity, "Transform3D:scale")[0], [0.1, 0.1, 1.0]
+    )
+    np.testing.assert_allclose(
+        recording.static_value(entity, "Transform3D:translation")[0],
+        [*ground_truth.origin, 0.0],
     )
     strips = recording.static_value("/world/walls", "LineStrips2D:strips")
     assert len(strips) == len(world.segments)
@@ -212,8 +228,12 @@ def test_grid_is_logged_with_its_transform_when_due(
     recording: Recording, ground_truth: GridMap
 ) -> None:
     assert recording.column("/robot_0/map", "step") == [0, 2, 4]  # map_every=2
-    (translation,) = recording.at_step("/robot_0/map", "GridMap:translation", 2)
-    (rotation,) = recording.at_step("/robot_0/map", "GridMap:rotation_axis_angle", 2)
+    (translation,) = recording.at_step("/robot_0/map", "Transform3D:translation", 2)
+    (rotation,) = recording.at_step("/robot_0/map", "Transform3D:rotation_axis_angle", 2)
+    (scale,) = recording.at_step("/robot_0/map", "Transform3D:scale", 2)
+    (fmt,) = recording.at_step("/robot_0/map", "SegmentationImage:format", 2)
+    assert (fmt[0]["height"], fmt[0]["width"]) == ground_truth.shape
+    np.testing.assert_allclose(scale[0], [0.1, 0.1, 1.0])
     corner = transform_points(MAP_FROM_WORLD, np.array([ground_truth.origin]))[0]
     np.testing.assert_allclose(translation[0], [*corner, 0.0], atol=1e-6)
     np.testing.assert_allclose(rotation[0]["axis"], [0.0, 0.0, 1.0])
@@ -223,9 +243,14 @@ def test_grid_is_logged_with_its_transform_when_due(
 def test_events_and_scalars(recording: Recording) -> None:
     texts = recording.column("/events", "TextLog:text")
     levels = recording.column("/events", "TextLog:level")
-    assert [t[0] for t in texts] == ["recording started"] + [f"step {s}" for s in range(N_STEPS)]
+    # Each line starts with its step, in six columns (the viewer clips a step column).
+    assert [t[0] for t in texts] == ["#0     recording started"] + [
+        f"#{s:<5} step {s}" for s in range(N_STEPS)
+    ]
     assert levels[5][0] == "WARN"  # "warning" normalised to Rerun's level name
     values = recording.column("/metrics/coverage", "Scalars:scalars")
+    # A static style names the series after its path.
+    assert recording.static_value("/metrics/coverage", "SeriesLines:names") == ["coverage"]
     np.testing.assert_allclose([v[0] for v in values], 0.1 * np.arange(N_STEPS))
 
 
@@ -236,18 +261,26 @@ def test_spatial_roots_are_turned_y_up(recording: Recording) -> None:
         assert rotation["angle"] == pytest.approx(np.pi)
 
 
-def test_default_blueprint_is_in_the_file(recording: Recording) -> None:
-    (blueprint,) = recording.reader.blueprints()
-    assert blueprint.application_id == "mrslam"
+def _blueprint_views(recording: Recording, store: Any) -> dict[str, str]:
     views: dict[str, str] = {}
-    for chunk in recording.reader.stream(store=blueprint):
+    for chunk in recording.reader.stream(store=store):
         batch = chunk.to_record_batch()
         if "ViewBlueprint:display_name" in batch.schema.names:
             name = batch.column("ViewBlueprint:display_name").to_pylist()[-1][0]
             views[name] = batch.column("ViewBlueprint:space_origin").to_pylist()[-1][0]
-    assert {"World", "Robot 0", "Robot 1", "Merge", "Metrics", "Events"} <= set(views)
+    return views
+
+
+def test_default_blueprints_are_in_the_file(recording: Recording) -> None:
+    """The full layout (at save) and the one made for what was logged (on close): here
+    no merge, no team, nothing in robot 1's frame. test_recording_views checks them."""
+    blueprints = recording.reader.blueprints()
+    assert [b.application_id for b in blueprints] == ["mrslam", "mrslam"]
+    full, made = sorted((_blueprint_views(recording, b) for b in blueprints), key=len)[::-1]
+    assert {"World", "Team", "Merge", "Robot 0", "Robot 1", "Events"} <= set(full)
+    assert {"World", "Robot 0", "Fractions (0–1)", "Events"} == set(made)
     # 2-D views sit at the root so that the y-up root transforms apply.
-    assert views["World"] == views["Robot 0"] == views["Merge"] == "/"
+    assert full["World"] == full["Robot 0"] == full["Merge"] == "/"
 
 
 # -- maps and poses line up --------------------------------------------------------------
@@ -273,42 +306,64 @@ def _view_from_root(recording: Recording, root: str) -> np.ndarray:
 def test_pose_lands_on_its_grid_cell_in_the_2d_view(
     recording: Recording, ground_truth: GridMap
 ) -> None:
-    """Emulate Rerun's placement (GridMap visualizer + root transform) for a pose.
+    """Emulate Rerun's placement (image + entity transform + root transform) for a pose.
 
-    The textured rect of a GridMap has its top-left corner at ``(0, h*cell)`` of the grid
-    frame and spans ``+x * w * cell`` and ``-y * h * cell`` from there.
+    An image's pixel (column u, row v) covers ``[u, u+1] x [v, v+1]`` of its entity's space;
+    the entity's ``Transform3D`` maps that to its parent as ``t + R (s * p)``, and the root's
+    rotation into the 2-D view (y down).
     """
     view_from_world = _view_from_root(recording, "/world")
     entity = "/world/ground_truth"
-    fmt = recording.static_value(entity, "GridMap:format")[0]
+    fmt = recording.static_value(entity, "SegmentationImage:format")[0]
     w, h = fmt["width"], fmt["height"]
-    cell = recording.static_value(entity, "GridMap:cell_size")[0]
-    corner = np.array(recording.static_value(entity, "GridMap:translation")[0])
-    image = np.array(recording.static_value(entity, "GridMap:data")[0]).reshape(h, w)
-    top_left = view_from_world @ (corner + np.array([0.0, h * cell, 0.0]))
-    extent_u = view_from_world @ [w * cell, 0.0, 0.0]
-    extent_v = view_from_world @ [0.0, -h * cell, 0.0]
+    image = np.array(recording.static_value(entity, "SegmentationImage:buffer")[0])
+    image = image.reshape(h, w)
+    translation = np.array(recording.static_value(entity, "Transform3D:translation")[0])
+    rotation = recording.static_value(entity, "Transform3D:rotation_axis_angle")[0]
+    scale = np.array(recording.static_value(entity, "Transform3D:scale")[0])
+    world_from_pixel = _rotation(rotation["axis"], rotation["angle"]) @ np.diag(scale)
+    view_from_pixel = view_from_world @ world_from_pixel
+    pixel_origin = view_from_world @ translation
 
     def texel(point_in_view: np.ndarray) -> tuple[float, float]:
-        a = np.linalg.lstsq(np.stack([extent_u, extent_v], 1), point_in_view - top_left)[0]
-        return a[1] * h, a[0] * w  # continuous (image row, column)
+        a = np.linalg.lstsq(view_from_pixel[:, :2], point_in_view - pixel_origin)[0]
+        return a[1], a[0]  # continuous (image row, column)
 
     (origin,) = recording.at_step("/world/robot_0/true_pose", "Arrows2D:origins", 0)
     pose_in_view = view_from_world @ [*origin[0], 0.0]
     row, col = texel(pose_in_view)
     # (2, 2) is a cell corner: the texel coordinates map back to exactly (2, 2).
+    cell = ground_truth.resolution
     np.testing.assert_allclose(
-        [corner[0] + col * cell, corner[1] + (h - row) * cell], [2.0, 2.0], atol=1e-5
+        [translation[0] + col * cell, translation[1] + row * cell], [2.0, 2.0], atol=1e-5
     )
     # Points inside cells land on those cells' pixels, free and occupied alike.
     for probe in ([2.05, 2.05], [5.05, 0.05], [9.95, 7.05], [3.05, 9.95]):
         row, col = (int(np.floor(v)) for v in texel(view_from_world @ [*probe, 0.0]))
         iy, ix = ground_truth.world_to_cell(probe)
-        assert (h - 1 - row, col) == (iy, ix)
-        assert image[row, col] == (0 if ground_truth.cells[iy, ix] == OCCUPIED else 254)
+        assert (row, col) == (iy, ix)
+        assert image[row, col] == (2 if ground_truth.cells[iy, ix] == OCCUPIED else 1)
     # Not mirrored: higher world y is higher on screen (the 2-D view's y points down).
     assert (view_from_world @ [2.0, 8.0, 0.0])[1] < pose_in_view[1]
     assert (view_from_world @ [8.0, 2.0, 0.0])[0] > pose_in_view[0]
+
+
+def test_scan_in_the_map_frame_uses_the_slam_pose(tmp_path: Path) -> None:
+    """``robot_i/scan`` is logged only when the SLAM pose is known at that step."""
+    path = tmp_path / "scan.rrd"
+    slam = np.array([1.0, 2.0, 0.5])
+    with Recorder(path, n_robots=1) as recorder:
+        recorder.log_scan(0, true_pose(0, 0), scan_ranges(0), ANGLES, MAX_RANGE)
+        recorder.set_time(1, DT)
+        recorder.log_robot_pose(0, slam)
+        recorder.log_scan(0, true_pose(0, 1), scan_ranges(1), ANGLES, MAX_RANGE)
+        recorder.set_time(2, 2 * DT)
+        recorder.log_scan(0, true_pose(0, 2), scan_ranges(2), ANGLES, MAX_RANGE)
+    recording = Recording(path)
+    assert recording.column("/robot_0/scan", "step") == [1]
+    (points,) = recording.at_step("/robot_0/scan", "Points2D:positions", 1)
+    expected = scan_hits_world(slam, scan_ranges(1), ANGLES, MAX_RANGE)
+    np.testing.assert_allclose(points, expected, atol=1e-5)
 
 
 # -- pure helpers and errors ---------------------------------------------------------------
@@ -334,6 +389,17 @@ def test_occupancy_image_flips_rows_and_keeps_input() -> None:
     np.testing.assert_array_equal(image, [[205, 254], [254, 0]])
     assert image.dtype == np.uint8
     np.testing.assert_array_equal(grid.cells, cells)
+
+
+def test_occupancy_classes_keep_rows_and_styles() -> None:
+    cells = np.array([[FREE, OCCUPIED], [UNKNOWN, FREE]], dtype=np.int8)
+    grid = GridMap(cells=cells, resolution=0.5)
+    np.testing.assert_array_equal(occupancy_classes(grid), [[1, 2], [0, 1]])
+    np.testing.assert_array_equal(occupancy_classes(grid, "overlay"), [[7, 8], [6, 7]])
+    assert occupancy_classes(grid).dtype == np.uint8
+    np.testing.assert_array_equal(grid.cells, cells)
+    with pytest.raises(KeyError):
+        occupancy_classes(grid, "plain")  # type: ignore[arg-type]
 
 
 def test_grid_corner_pose() -> None:

@@ -43,7 +43,7 @@ MERGE_ENTITIES = {
     "/metrics/merge/psi",
     "/metrics/merge/acceptance_index",
 }
-PIXEL = {FREE: 254, OCCUPIED: 0, UNKNOWN: 205}  # recording.occupancy_image's grey levels
+PIXEL = {UNKNOWN: 0, FREE: 1, OCCUPIED: 2}  # recording.occupancy_classes, style "map"
 
 
 @dataclass(frozen=True)
@@ -86,10 +86,10 @@ def only(recording: Recording, entity: str, column: str) -> Any:
 
 
 def grid_image(recording: Recording, entity: str) -> np.ndarray:
-    """A logged GridMap's grey image with row 0 = lowest y (as our grids)."""
-    fmt = recording.column(entity, "GridMap:format")[0][0]
-    data = np.array(recording.column(entity, "GridMap:data")[0][0], dtype=np.uint8)
-    return data.reshape(fmt["height"], fmt["width"])[::-1]
+    """A logged map's class-id image, row 0 = lowest y (as our grids)."""
+    fmt = recording.column(entity, "SegmentationImage:format")[0][0]
+    data = np.array(recording.column(entity, "SegmentationImage:buffer")[0][0], dtype=np.uint8)
+    return data.reshape(fmt["height"], fmt["width"])
 
 
 # -- what is in the file ---------------------------------------------------------------------
@@ -103,8 +103,8 @@ def test_merge_entities_are_recorded(merged: Logged) -> None:
 def test_single_shot_entities_are_at_the_current_step(merged: Logged) -> None:
     recording = merged.recording
     for entity, column in [
-        ("/merge/map1", "GridMap:translation"),
-        ("/merge/result", "GridMap:translation"),
+        ("/merge/map1", "Transform3D:translation"),
+        ("/merge/result", "Transform3D:translation"),
         ("/merge/hypotheses", "Arrows2D:origins"),
         ("/merge/refine/best", "Arrows2D:origins"),
         ("/metrics/merge/psi", "Scalars:scalars"),
@@ -115,7 +115,7 @@ def test_single_shot_entities_are_at_the_current_step(merged: Logged) -> None:
     for batch in recording.batches("/events"):
         assert "merge_iteration" not in batch.schema.names
     texts = [t[0] for t in recording.column("/events", "TextLog:text")]
-    assert texts == [merged.result.reason, "after the merge"]
+    assert texts == [f"#{STEP:<5} {merged.result.reason}", f"#{STEP:<5} after the merge"]
 
 
 def test_inputs_and_fused_map_line_up_in_map1_frame(merged: Logged) -> None:
@@ -123,11 +123,12 @@ def test_inputs_and_fused_map_line_up_in_map1_frame(merged: Logged) -> None:
     assert result.transform is not None and result.fused is not None
     # Map 1 and the fused map are drawn as they are: in map 1's frame, unturned.
     for entity, grid in (("/merge/map1", m1), ("/merge/result", result.fused)):
-        (translation,) = only(recording, entity, "GridMap:translation")
-        (rotation,) = only(recording, entity, "GridMap:rotation_axis_angle")
+        (translation,) = only(recording, entity, "Transform3D:translation")
+        (rotation,) = only(recording, entity, "Transform3D:rotation_axis_angle")
         np.testing.assert_allclose(translation, [*grid.origin, 0.0], atol=1e-6)
         assert rotation["angle"] == pytest.approx(0.0, abs=1e-9)
-        assert only(recording, entity, "GridMap:cell_size") == [pytest.approx(m1.resolution)]
+        (scale,) = only(recording, entity, "Transform3D:scale")
+        np.testing.assert_allclose(scale, [m1.resolution, m1.resolution, 1.0])
     # The fused grid is m1's lattice grown by whole cells ...
     fused = result.fused
     offset = (np.asarray(m1.origin) - np.asarray(fused.origin)) / fused.resolution
@@ -141,8 +142,8 @@ def test_inputs_and_fused_map_line_up_in_map1_frame(merged: Logged) -> None:
     assert np.all(block[~m1.unknown] != PIXEL[UNKNOWN])
     np.testing.assert_array_equal(image == PIXEL[OCCUPIED], fused.occupied)
     # Map 2 is placed by the answer: its corner moved, its axes turned.
-    (translation,) = only(recording, "/merge/map2", "GridMap:translation")
-    (rotation,) = only(recording, "/merge/map2", "GridMap:rotation_axis_angle")
+    (translation,) = only(recording, "/merge/map2", "Transform3D:translation")
+    (rotation,) = only(recording, "/merge/map2", "Transform3D:rotation_axis_angle")
     corner = transform_points(result.transform, np.array([m2.origin]))[0]
     np.testing.assert_allclose(translation, [*corner, 0.0], atol=1e-5)
     assert rotation["angle"] == pytest.approx(result.transform[2], abs=1e-6)
@@ -161,6 +162,7 @@ def test_skeletons_and_virtual_runs_lie_on_map1_free_space(merged: Logged) -> No
     skeleton1 = only(recording, "/merge/skeleton/map1", "Points2D:positions")
     skeleton1 = np.asarray(skeleton1, dtype=np.float64)
     assert len(skeleton1) == np.count_nonzero(result.trace.hypotheses.skeleton1.skeleton)
+    # On map 1's free space, drawn where it belongs.
     assert np.all(cells_of(skeleton1, working1) == FREE)
     # Map 2's skeleton is drawn where the answer puts it: on map 2's free space.
     skeleton2 = only(recording, "/merge/skeleton/map2", "Points2D:positions")
@@ -171,9 +173,11 @@ def test_skeletons_and_virtual_runs_lie_on_map1_free_space(merged: Logged) -> No
     runs = result.trace.hypotheses.runs
     strips = only(recording, "/merge/virtual_robot/path", "LineStrips2D:strips")
     assert len(strips) == len(runs) >= 2
+    on_free = []
     for strip, run in zip(strips, runs, strict=True):
         np.testing.assert_allclose(strip, run.poses_in_map1[:, :2], atol=1e-5)
-        assert np.all(cells_of(np.asarray(strip, dtype=np.float64), working1) == FREE)
+        on_free.extend(cells_of(np.asarray(strip, dtype=np.float64), working1) == FREE)
+    assert all(on_free)
 
 
 def test_virtual_scans_hit_map1_walls(merged: Logged) -> None:
@@ -268,14 +272,15 @@ def test_refusal_draws_map2_beside_map1_and_no_result(refused: Logged) -> None:
         "/merge/mcl/particles",
     } <= entities
     assert not {"/merge/result", "/merge/refine/best", "/metrics/merge/psi"} & entities
-    (translation,) = only(recording, "/merge/map2", "GridMap:translation")
-    (rotation,) = only(recording, "/merge/map2", "GridMap:rotation_axis_angle")
+    (translation,) = only(recording, "/merge/map2", "Transform3D:translation")
+    (rotation,) = only(recording, "/merge/map2", "Transform3D:rotation_axis_angle")
     assert translation[0] > m1.extent[2]  # right of map 1, not overlapping it
     assert translation[1] == pytest.approx(m1.origin[1])
     assert rotation["angle"] == pytest.approx(0.0, abs=1e-9)
     assert m2.cells.size > 0
     texts = [t[0] for t in recording.column("/events", "TextLog:text")]
-    assert texts[0] == result.reason and texts[0].startswith("no confident merge")
+    assert texts[0] == f"#{STEP:<5} {result.reason}"
+    assert result.reason.startswith("no confident merge")
 
 
 # -- mrslam merge --rrd ------------------------------------------------------------------------
@@ -293,10 +298,10 @@ def test_cli_merge_writes_the_recording(tmp_path: Path, capsys: pytest.CaptureFi
     recording = Recording(rrd)
     assert set(recording.chunks) >= MERGE_ENTITIES
     loaded = load_map(map1)
-    (translation,) = recording.column("/merge/map1", "GridMap:translation")[0]
+    (translation,) = recording.column("/merge/map1", "Transform3D:translation")[0]
     np.testing.assert_allclose(translation, [*loaded.origin, 0.0], atol=1e-6)
     fused = load_map(tmp_path / "o.yaml")
-    (translation,) = recording.column("/merge/result", "GridMap:translation")[0]
+    (translation,) = recording.column("/merge/result", "Transform3D:translation")[0]
     np.testing.assert_allclose(translation, [*fused.origin, 0.0], atol=1e-6)
     assert grid_image(recording, "/merge/result").shape == fused.shape
     assert "map1_from_map2" in out
