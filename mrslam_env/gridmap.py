@@ -20,7 +20,15 @@ FREE = np.int8(0)
 OCCUPIED = np.int8(100)
 UNKNOWN = np.int8(-1)
 
-__all__ = ["FREE", "OCCUPIED", "UNKNOWN", "GridMap", "grid_footprint", "resample_cells"]
+__all__ = [
+    "FREE",
+    "OCCUPIED",
+    "UNKNOWN",
+    "GridMap",
+    "crop_to_known",
+    "grid_footprint",
+    "resample_cells",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -188,3 +196,42 @@ def grid_footprint(grid: GridMap, frame_from_grid: FloatArray) -> FloatArray:
     corners = np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])
     c, s = math.cos(frame_from_grid[2]), math.sin(frame_from_grid[2])
     return corners @ np.array([[c, s], [-s, c]]) + frame_from_grid[:2]
+
+
+def crop_to_known(grid: GridMap, margin: int = 0) -> GridMap:
+    """The grid cut to the bounding box of its known cells, grown by ``margin`` cells.
+
+    The box is grown with UNKNOWN cells where it passes the grid's edge, so the result
+    depends only on the known cells and the lattice: a map padded with unknown cells (as
+    gmapping's 4000 x 4000 default) crops to the same grid as the map itself. The frame is
+    unchanged (the origin moves with the box).
+
+    Parameters
+    ----------
+    grid : GridMap
+    margin : int
+        Unknown cells kept (or added) around the known box, >= 0.
+
+    Returns
+    -------
+    GridMap
+        ``grid`` itself when it has no known cell or is already the box.
+    """
+    if margin < 0:
+        raise ValueError(f"margin must be >= 0 cells, got {margin}")
+    known_rows = np.flatnonzero((grid.cells != UNKNOWN).any(axis=1))
+    if known_rows.size == 0:
+        return grid
+    known_cols = np.flatnonzero((grid.cells != UNKNOWN).any(axis=0))
+    r0, r1 = int(known_rows[0]) - margin, int(known_rows[-1]) + 1 + margin
+    c0, c1 = int(known_cols[0]) - margin, int(known_cols[-1]) + 1 + margin
+    rows, cols = grid.shape
+    if (r0, c0, r1, c1) == (0, 0, rows, cols):
+        return grid
+    cells = np.full((r1 - r0, c1 - c0), UNKNOWN, dtype=np.int8)
+    inner = grid.cells[max(r0, 0) : min(r1, rows), max(c0, 0) : min(c1, cols)]
+    cells[
+        max(-r0, 0) : max(-r0, 0) + inner.shape[0], max(-c0, 0) : max(-c0, 0) + inner.shape[1]
+    ] = inner
+    origin = (grid.origin[0] + c0 * grid.resolution, grid.origin[1] + r0 * grid.resolution)
+    return GridMap(cells=cells, resolution=grid.resolution, origin=origin)

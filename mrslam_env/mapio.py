@@ -196,7 +196,10 @@ def _read_pnm_grey(path: Path, data: bytes) -> NDArray[np.uint8]:
                 f"PGM data is {len(raster)} bytes but the header says {width} x {height} = "
                 f"{count}" + (" (header lines end in CRLF)" if crlf else ""),
             )
-        samples = np.frombuffer(raster, dtype=np.uint8).astype(np.int64)
+        samples = np.frombuffer(raster, dtype=np.uint8)
+        if maxval == 255:  # the common case: the bytes are the grey levels
+            return samples.reshape(height, width)
+        samples = samples.astype(np.int64)
     else:
         tokens = data[position:].split()
         if len(tokens) != count:
@@ -318,21 +321,23 @@ def grey_to_cells(
     ndarray of int8, shape (H, W)
         ``FREE``, ``OCCUPIED`` or ``UNKNOWN``, same row order as ``grey``.
     """
-    value = np.asarray(grey, dtype=np.int64)
+    if mode not in MODES:
+        raise ValueError(f"unsupported map mode {mode!r}; expected one of {MODES}")
+    # The rule applied to each of the 256 grey levels once, then looked up: one byte per
+    # pixel of working memory, whatever the image size.
+    value = np.arange(256, dtype=np.int64)
     if negate:
         value = 255 - value
-    cells = np.full(value.shape, UNKNOWN, dtype=np.int8)
+    table = np.full(256, UNKNOWN, dtype=np.int8)
     if mode == "raw":
         percent = value
-        cells[(percent <= 100) & (percent >= 100.0 * occupied_thresh)] = OCCUPIED
-        cells[(percent <= 100) & (percent <= 100.0 * free_thresh)] = FREE
-        return cells
-    if mode not in ("trinary", "scale"):
-        raise ValueError(f"unsupported map mode {mode!r}; expected one of {MODES}")
-    occupancy = (255.0 - value) / 255.0
-    cells[occupancy > occupied_thresh] = OCCUPIED
-    cells[occupancy < free_thresh] = FREE
-    return cells
+        table[(percent <= 100) & (percent >= 100.0 * occupied_thresh)] = OCCUPIED
+        table[(percent <= 100) & (percent <= 100.0 * free_thresh)] = FREE
+    else:
+        occupancy = (255.0 - value) / 255.0
+        table[occupancy > occupied_thresh] = OCCUPIED
+        table[occupancy < free_thresh] = FREE
+    return table[np.asarray(grey, dtype=np.uint8)]
 
 
 # --------------------------------------------------------------------------------------

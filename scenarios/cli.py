@@ -1,7 +1,7 @@
 """The ``mrslam`` command line.
 
 ``mrslam run``                 the end-to-end experiment on the default scenario
-``mrslam merge M1.yaml M2.yaml`` merge two ROS map files (``-o``, ``--json``, ``--rrd``)
+``mrslam merge M1.yaml M2.yaml [M3.yaml ...]`` merge ROS map files into the first's frame
 ``mrslam scenarios``           list worlds; ``--export NAME OUT.yaml`` writes a floor plan
 ``mrslam bench sim``           simulator speed, side by side with IR-SIM
 ``mrslam bench slam``          onboard SLAM accuracy (ATE, map agreement) and speed
@@ -25,7 +25,7 @@ import sys
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 __all__ = ["main"]
 
@@ -94,10 +94,10 @@ def _build_parser() -> argparse.ArgumentParser:
 
     merge = commands.add_parser(
         "merge",
-        help="merge two ROS map files (exit 0 merged, 3 no confident merge, 2 bad input)",
+        help="merge two or more ROS map files into the first one's frame "
+        "(exit 0 merged, 3 no confident merge for some map, 2 bad input)",
     )
-    merge.add_argument("map1", type=Path, metavar="MAP1.yaml")
-    merge.add_argument("map2", type=Path, metavar="MAP2.yaml")
+    merge.add_argument("maps", type=Path, nargs="+", metavar="MAP.yaml", help="2 or more maps")
     merge.add_argument(
         "-o",
         "--output",
@@ -236,8 +236,12 @@ def _cmd_merge(args: argparse.Namespace) -> int:
     from mrslam_env.mapio import load_map, map_images, map_yaml_path, save_map
     from mrslam_env.merge.pipeline import merge_maps
 
-    m1, m2 = load_map(args.map1), load_map(args.map2)
-    inputs = [args.map1, args.map2, *map_images(args.map1, args.map2)]
+    if len(args.maps) < 2:
+        raise ValueError(f"merge needs at least two maps, got {len(args.maps)}")
+    if len(args.maps) > 2 and args.rrd is not None:
+        raise ValueError("--rrd records the stages of a two-map merge; give two maps")
+    grids = [load_map(path) for path in args.maps]
+    inputs = [*args.maps, *map_images(*args.maps)]
     outputs = []
     if args.output is not None:
         if args.output.is_dir():
@@ -247,6 +251,9 @@ def _cmd_merge(args: argparse.Namespace) -> int:
     if args.rrd is not None:
         outputs.append(args.rrd)
     check_outputs(outputs, inputs)
+    if len(grids) > 2:
+        return _merge_many(args, grids)
+    m1, m2 = grids
     result = merge_maps(m1, m2, rng=np.random.default_rng(args.seed), trace=args.rrd is not None)
     if result.fused is not None and args.output is not None:
         args.output = save_map(args.output, result.fused)
@@ -267,6 +274,50 @@ def _cmd_merge(args: argparse.Namespace) -> int:
     else:
         print(result.reason)
     return 0 if result.transform is not None else EXIT_NO_MERGE
+
+
+def _merge_many(args: argparse.Namespace, grids: list[Any]) -> int:
+    """``mrslam merge A B C ...``: every map into A's frame; exit 3 if any is unmerged."""
+    from mrslam_env.mapio import save_map
+    from mrslam_env.merge.many import merge_many
+
+    result = merge_many(grids, rng=args.seed)
+    names = [str(path) for path in args.maps]
+
+    def pose(transform: Any) -> dict[str, float] | None:
+        if transform is None:
+            return None
+        x, y, theta = (float(v) for v in transform)
+        return {"x": x, "y": y, "theta": theta}
+
+    if args.output is not None:
+        args.output = save_map(args.output, result.fused)
+    if args.json:
+        report = {
+            "maps": names,
+            "transforms": {name: pose(t) for name, t in zip(names, result.transforms, strict=True)},
+            "unmerged": [names[k] for k in result.unmerged],
+            "tree": [[names[a], names[b]] for a, b in result.tree],
+            "inconsistent": [[names[a], names[b]] for a, b in result.inconsistent],
+            "pairs": [
+                {"map1": names[i], "map2": names[j], **pair.as_dict()}
+                for (i, j), pair in result.pairs.items()
+            ],
+            "seconds": round(sum(p.seconds.get("total", 0.0) for p in result.pairs.values()), 4),
+        }
+        print(json.dumps(report, indent=2))
+    else:
+        for name, transform in zip(names[1:], result.transforms[1:], strict=True):
+            if transform is None:
+                print(f"{name}: no confident merge with any map")
+            else:
+                x, y, theta = transform
+                print(f"{name}: map0_from_map x {x:.4f} m, y {y:.4f} m, theta {theta:.5f} rad")
+        for a, b in result.inconsistent:
+            print(f"warning: the merge of {names[a]} and {names[b]} contradicts the others")
+        if args.output is not None:
+            print(f"merged map written to {args.output}")
+    return EXIT_NO_MERGE if result.unmerged else 0
 
 
 def _cmd_scenarios(args: argparse.Namespace) -> int:

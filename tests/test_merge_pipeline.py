@@ -366,6 +366,25 @@ def test_very_large_map_is_merged_coarse_to_fine(
     assert result.fused.shape[0] >= 1500 and result.fused.shape[1] >= 1500
 
 
+def test_with_crop_to_known_padding_changes_nothing(
+    warehouse_pair: tuple[GridMap, GridMap, np.ndarray],
+) -> None:
+    # gmapping-style unknown padding around map 2 (80 m x 80 m at 0.05 m): cut to the
+    # known area first, the merge sees the same grids and gives the same answer.
+    m1, m2, truth = warehouse_pair
+    config = MergeConfig(crop_to_known=True)
+    plain = merge_maps(m1, m2, config, rng=SEED, trace=True)
+    padded = merge_maps(m1, _padded(m2, (1600, 1600), (700, 650)), config, rng=SEED, trace=True)
+    assert plain.transform is not None and padded.transform is not None
+    np.testing.assert_array_equal(plain.transform, padded.transform)
+    assert plain.reason == padded.reason and plain.psi == padded.psi
+    assert plain.trace is not None and padded.trace is not None
+    assert plain.trace.working2.shape == padded.trace.working2.shape
+    assert plain.trace.working2.origin == pytest.approx(padded.trace.working2.origin)
+    translation, rotation = errors(plain, truth, m2)
+    assert translation <= MERGE_TOLERANCE_M and rotation <= ONE_DEGREE
+
+
 def test_same_seed_gives_the_same_result(
     warehouse_pair: tuple[GridMap, GridMap, np.ndarray],
 ) -> None:
