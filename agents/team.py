@@ -48,6 +48,7 @@ from mrslam_env.merge.fuse import fuse_maps, resample_map
 from mrslam_env.merge.pipeline import (
     MergeConfig,
     MergeInputError,
+    MergeResult,
     merge_maps,
     refine_transform,
     same_answer,
@@ -56,6 +57,7 @@ from mrslam_env.validation import check_fields, require
 
 __all__ = [
     "Decision",
+    "MergeAttempt",
     "TeamConfig",
     "TeamCoordinator",
     "TeamState",
@@ -93,6 +95,9 @@ class TeamConfig:
     the margin keeps the prediction's error inside the sensor's range (m, >= 0)."""
     interaction: bool = True
     """False: the robots never interact (the independent-exploration baseline)."""
+    keep_merges: bool = False
+    """Keep every merge attempt, with its stages (``merge_maps(..., trace=True)``), for
+    :meth:`TeamCoordinator.pop_merge_attempts` (the recorder draws them)."""
     min_map_area: float = 15.0
     """Each map must know at least this much (m²) before a merge is tried."""
     regrow_factor: float = 1.3
@@ -163,6 +168,19 @@ class Decision:
 
     step: int
     text: str
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class MergeAttempt:
+    """One merge of the exchanged maps (kept with ``TeamConfig.keep_merges``)."""
+
+    number: int
+    """Counts the attempts from 1."""
+    step: int
+    result: MergeResult
+    """With its trace: ``merge_maps(map0, map1, ..., trace=True)``."""
+    map0: GridMap
+    map1: GridMap
 
 
 @dataclass(slots=True)
@@ -292,6 +310,8 @@ class TeamCoordinator:
         already explored)."""
         self.rendezvous: _Rendezvous | None = None
         self._decisions: list[Decision] = []
+        self._merge_attempts: list[MergeAttempt] = []
+        self._merges_tried = 0
         self._received: list[GridMap | None] = [None, None]
         """Per robot, the other robot's map as it last received it (while the link was
         up)."""
@@ -334,6 +354,11 @@ class TeamCoordinator:
     def pop_decisions(self) -> list[Decision]:
         decisions, self._decisions = self._decisions, []
         return decisions
+
+    def pop_merge_attempts(self) -> list[MergeAttempt]:
+        """The merge attempts since the last call (empty unless ``config.keep_merges``)."""
+        attempts, self._merge_attempts = self._merge_attempts, []
+        return attempts
 
     def _decide(self, text: str) -> None:
         self._decisions.append(Decision(self.step, text))
@@ -381,11 +406,20 @@ class TeamCoordinator:
         )
         self._retry_area = sum(areas) * self.config.regrow_factor
         try:
-            result = merge_maps(m0, m1, self.config.merge, rng=self.rng)
+            result = merge_maps(
+                m0, m1, self.config.merge, rng=self.rng, trace=self.config.keep_merges
+            )
         except MergeInputError as error:
             self._decide(f"no hypotheses: {error}")
             self.state = TeamState.NO_INTERACTION
             return
+        self._merges_tried += 1
+        if self.config.keep_merges:
+            self._merge_attempts.append(
+                MergeAttempt(
+                    number=self._merges_tried, step=self.step, result=result, map0=m0, map1=m1
+                )
+            )
         pivot = m1.cell_to_world(np.argwhere(~m1.unknown).mean(axis=0)[None, :])[0]
         fresh = distinct_hypotheses(
             [h.map1_from_map2 for h in result.hypotheses if h.confident],

@@ -180,7 +180,9 @@ class MapCache:
 def build_team(config: RunConfig, env_config: EnvConfig) -> TeamCoordinator:
     """The run's team, planning for the env's robots and sensors (``env_config`` is the
     env's own config: its robot radius, speeds, control period and peer sensor range)."""
-    team_config = TeamConfig.for_env(env_config, interaction=config.interaction)
+    team_config = TeamConfig.for_env(
+        env_config, interaction=config.interaction, keep_merges=config.record
+    )
     return TeamCoordinator.for_env(
         env_config, rng=np.random.default_rng(config.seed), config=team_config
     )
@@ -246,6 +248,8 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
         return absolute_trajectory_error(slam_poses[i], true_poses[i], world_from_maps[i])
 
     logged_scans = [-1] * len(agents)
+    rendezvous_shown = [False]
+    shown_transform: FloatArray | None = None
     collisions = dict.fromkeys(agents, 0)
     state = team.state
     coverage_curve: list[tuple[int, float]] = []
@@ -272,10 +276,29 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                         recorder.log_event(decision.text)
                         if "rendezvous" in decision.text or "hypothesis #" in decision.text:
                             recorder.log_text("rendezvous/status", decision.text)
+                    for attempt in team.pop_merge_attempts():
+                        recorder.log_merge_attempt(
+                            attempt.number,
+                            attempt.result,
+                            attempt.map0,
+                            attempt.map1,
+                            label=f"robot_0's and robot_1's maps at step {attempt.step}",
+                        )
+                    if team.transform is not None and team.transform is not shown_transform:
+                        recorder.set_team_transform(1, team.transform)
+                        shown_transform = team.transform
                     if team.state is not state:
                         recorder.log_text("team/state", str(team.state))
                     _record_step(
-                        recorder, env, team, maps, observations, infos, config, logged_scans
+                        recorder,
+                        env,
+                        team,
+                        maps,
+                        observations,
+                        infos,
+                        config,
+                        logged_scans,
+                        rendezvous_shown,
                     )
                     if recorder.map_due:
                         for i, agent in enumerate(agents):
@@ -397,15 +420,18 @@ def _record_step(
     infos: dict[str, Any],
     config: RunConfig,
     logged_scans: list[int],
+    rendezvous_shown: list[bool],
 ) -> None:
-    """What one step adds to the recording (docs/design.md §7)."""
+    """What one step adds to the recording (docs/design.md §7). ``rendezvous_shown`` holds
+    whether a rendezvous is drawn, so that its end clears it once."""
     agents = list(env.possible_agents)
     lidar = env.config.lidar
     due = recorder.map_due or not env.agents
     coordinated = team.state is TeamState.COORDINATED_EXPLORATION and team.transform is not None
     for i, agent in enumerate(agents):
-        recorder.log_true_pose(i, infos[agent]["true_pose"])
-        recorder.log_robot_pose(i, observations[agent]["pose"])
+        radius = env.config.robot.radius
+        recorder.log_true_pose(i, infos[agent]["true_pose"], radius=radius)
+        recorder.log_robot_pose(i, observations[agent]["pose"], radius=radius)
         if recorder.step % config.scan_every == 0:
             recorder.log_scan(
                 i,
@@ -436,15 +462,24 @@ def _record_step(
                 recorder.log_line(f"{agent}/plan", points, robot=i)
             else:
                 recorder.log_points(f"{agent}/frontiers", points, robot=i)
-    # A rendezvous can be settled within a few steps: log it every step while it lasts.
-    if team.rendezvous is not None:
-        recorder.log_points("rendezvous/meeting_point", team.rendezvous.meeting_point)
-        for i in range(2):
-            plan = team.explorers[i].plan
-            if i == 1 and len(plan):
-                plan = transform_points(team.rendezvous.hypothesis, plan)
-            recorder.log_line(f"rendezvous/plan_{i}", plan, robot=i)
-    elif due:
-        recorder.log_points("rendezvous/meeting_point", np.empty((0, 2)))
+    # A rendezvous can be settled within a few steps: log it every step while it lasts,
+    # all in robot 0's map frame (robot 1's plan and pose brought there by the hypothesis).
+    rendezvous = team.rendezvous
+    if rendezvous is not None:
+        hypothesis = rendezvous.hypothesis
+        plans = [team.explorers[0].plan, team.explorers[1].plan]
+        if len(plans[1]):
+            plans[1] = transform_points(hypothesis, plans[1])
+        poses = [
+            observations[agents[0]]["pose"],
+            compose(hypothesis, observations[agents[1]]["pose"]),
+        ]
+        recorder.log_rendezvous(
+            rendezvous.meeting_point, plans, poses=poses, radius=env.config.robot.radius
+        )
+        rendezvous_shown[0] = True
+    elif rendezvous_shown[0]:
+        recorder.clear_rendezvous()
+        rendezvous_shown[0] = False
     if due and coordinated and team.merged_map is not None:
         recorder.log_grid("team/merged_map", team.merged_map)

@@ -99,7 +99,7 @@ def test_run_writes_report_and_recording(capsys, tmp_path) -> None:
         (origin,) = recording.at_step(f"/{robot}/pose", "Arrows2D:origins", 60)
         cell = saved.world_to_cell(np.asarray(origin))[0]
         assert saved.free[cell[0], cell[1]], "the final pose stands on free space of the map"
-        (translation,) = recording.at_step(f"/{robot}/map", "GridMap:translation", 60)
+        (translation,) = recording.at_step(f"/{robot}/map", "Transform3D:translation", 60)
         np.testing.assert_allclose(np.ravel(translation)[:2], saved.origin, atol=1e-6)
 
 
@@ -130,6 +130,12 @@ def test_the_default_experiment_verifies_a_merge_and_records_the_team(capsys, tm
         assert entity in recording.chunks, entity
     events = " ".join(str(text) for text in recording.column("/events", "TextLog:text"))
     assert "rendezvous for hypothesis" in events and "accepted" in events
+    # The live merge is recorded, stage by stage, and robot 1 joins the Team view.
+    for entity in ("/merge/map1", "/merge/map2", "/merge/hypotheses", "/team/robot_1/pose"):
+        assert entity in recording.chunks, entity
+    assert any(path.startswith("/merge/skeleton") for path in recording.chunks)
+    assert any(path.startswith("/merge/mcl") for path in recording.chunks)
+    assert "merge attempt 1" in events
 
 
 def test_run_without_comm_explores_independently(capsys, tmp_path) -> None:

@@ -251,7 +251,7 @@ def test_the_team_judges_plain_sight_by_the_env_peer_sensor() -> None:
 
 def test_the_runners_factory_builds_the_team_for_the_env() -> None:
     team = experiment.build_team(experiment.RunConfig(interaction=False, seed=3), ENV)
-    assert team.config == TeamConfig.for_env(ENV, interaction=False)
+    assert team.config == TeamConfig.for_env(ENV, interaction=False, keep_merges=True)
     assert team.config.in_sight_range == 7.0
     for explorer in team.explorers:
         assert explorer.config.planner.robot_radius == 0.3
