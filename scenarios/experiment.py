@@ -33,13 +33,14 @@ import signal
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from agents.rendezvous import judge_sighting, sighting_pose
 from agents.team import TeamConfig, TeamCoordinator, TeamState
 from mrslam_env.atomic import atomic_path, write_text_atomic
 from mrslam_env.config import CommConfig, EnvConfig
@@ -248,7 +249,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
         return absolute_trajectory_error(slam_poses[i], true_poses[i], world_from_maps[i])
 
     logged_scans = [-1] * len(agents)
-    rendezvous_shown = [False]
+    drawn = _DrawnRendezvous()
     shown_transform: FloatArray | None = None
     collisions = dict.fromkeys(agents, 0)
     state = team.state
@@ -298,7 +299,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                         infos,
                         config,
                         logged_scans,
-                        rendezvous_shown,
+                        drawn,
                     )
                     if recorder.map_due:
                         for i, agent in enumerate(agents):
@@ -411,6 +412,15 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
     return report
 
 
+@dataclass(slots=True)
+class _DrawnRendezvous:
+    """What the recording shows of the current rendezvous: whether one is drawn (its end
+    clears it once) and robot 0's sightings of robot 1 so far, each with its verdict."""
+
+    active: bool = False
+    sightings: list[tuple[FloatArray, bool]] = field(default_factory=list)
+
+
 def _record_step(
     recorder: Recorder,
     env: MultiRobotSlamEnv,
@@ -420,10 +430,9 @@ def _record_step(
     infos: dict[str, Any],
     config: RunConfig,
     logged_scans: list[int],
-    rendezvous_shown: list[bool],
+    drawn: _DrawnRendezvous,
 ) -> None:
-    """What one step adds to the recording (docs/design.md §7). ``rendezvous_shown`` holds
-    whether a rendezvous is drawn, so that its end clears it once."""
+    """What one step adds to the recording (docs/design.md §7)."""
     agents = list(env.possible_agents)
     lidar = env.config.lidar
     due = recorder.map_due or not env.agents
@@ -474,12 +483,25 @@ def _record_step(
             observations[agents[0]]["pose"],
             compose(hypothesis, observations[agents[1]]["pose"]),
         ]
+        # Robot 0's sightings of robot 1 since the rendezvous began, each judged against
+        # where the hypothesis puts robot 1 (as the team judges them).
+        peer = observations[agents[0]]["peer"][0]
+        if peer[0] > 0.5:
+            seen = sighting_pose(peer[1], peer[2], peer[3])
+            predicted = compose(inverse(poses[0]), poses[1])
+            verdict = judge_sighting(seen, predicted, team.config.rendezvous).matches
+            drawn.sightings.append((compose(poses[0], seen)[:2], verdict))
         recorder.log_rendezvous(
-            rendezvous.meeting_point, plans, poses=poses, radius=env.config.robot.radius
+            rendezvous.meeting_point,
+            plans,
+            poses=poses,
+            sightings=np.array([s for s, _ in drawn.sightings]).reshape(-1, 2),
+            sighting_matches=[m for _, m in drawn.sightings],
+            radius=env.config.robot.radius,
         )
-        rendezvous_shown[0] = True
-    elif rendezvous_shown[0]:
+        drawn.active = True
+    elif drawn.active:
         recorder.clear_rendezvous()
-        rendezvous_shown[0] = False
+        drawn.active, drawn.sightings = False, []
     if due and coordinated and team.merged_map is not None:
         recorder.log_grid("team/merged_map", team.merged_map)

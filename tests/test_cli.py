@@ -136,6 +136,8 @@ def test_the_default_experiment_verifies_a_merge_and_records_the_team(capsys, tm
     assert any(path.startswith("/merge/skeleton") for path in recording.chunks)
     assert any(path.startswith("/merge/mcl") for path in recording.chunks)
     assert "merge attempt 1" in events
+    # The rendezvous' sightings of robot 1, judged against the prediction, were drawn.
+    assert "/rendezvous/sightings" in recording.chunks
 
 
 def test_run_without_comm_explores_independently(capsys, tmp_path) -> None:
