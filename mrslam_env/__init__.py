@@ -2,7 +2,11 @@
 
 This package is kept light on import: heavy modules (pymunk, pettingzoo, rerun) load only
 when used. ``parallel_env`` and ``env`` are resolved lazily from :mod:`mrslam_env.env`;
-importing that module also registers ``"mrslam/MultiRobotSlam-v0"`` with PettingZoo.
+importing that module also registers ``"mrslam/MultiRobotSlam-v0"`` with PettingZoo and
+``"mrslam/SingleRobot-v0"`` with Gymnasium (:mod:`mrslam_env.wrappers`).
+
+``mrslam_env.env`` is the module :mod:`mrslam_env.env`, made callable: ``mrslam_env.env(...)``
+builds the AEC environment, as PettingZoo's tests expect of an environment package.
 """
 
 from __future__ import annotations
@@ -21,5 +25,8 @@ def __getattr__(name: str) -> Any:
 
         # Not ``from mrslam_env import env``: that looks the name up on this package
         # first, which would call this function again.
-        return getattr(importlib.import_module("mrslam_env.env"), name)
+        module = importlib.import_module("mrslam_env.env")
+        # ``env`` is the callable module itself, the same object the import system binds
+        # to this package's attribute once the submodule is loaded.
+        return module if name == "env" else getattr(module, name)
     raise AttributeError(f"module 'mrslam_env' has no attribute {name!r}")

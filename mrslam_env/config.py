@@ -132,10 +132,17 @@ class CommConfig:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class RewardConfig:
-    """Per-step reward: newly observed area minus a collision penalty."""
+    """Per-step reward: newly observed area (own, plus optionally team novelty) minus a
+    collision penalty."""
 
     area_weight: float = 1.0
-    """Reward per newly observed square metre."""
+    """Reward per square metre the robot knows for the first time this episode (in its own
+    map with SLAM on; never negative: a cell that turns back to unknown and known again
+    pays once)."""
+    team_novelty_weight: float = 0.0
+    """Reward per square metre of the common world-frame coverage grid
+    (``coverage_resolution``) that the robot covered this step and no robot had covered
+    before it (privileged: the env projects maps with the true start poses)."""
     collision_penalty: float = 1.0
     """Subtracted on each step in which the robot touches a wall or another robot."""
     coverage_resolution: float = 0.2
@@ -146,7 +153,7 @@ class RewardConfig:
     def __post_init__(self) -> None:
         check_fields(
             self,
-            non_negative=("area_weight", "collision_penalty"),
+            non_negative=("area_weight", "team_novelty_weight", "collision_penalty"),
             positive=("coverage_resolution",),
         )
 
@@ -191,9 +198,30 @@ class EnvConfig:
     starts: tuple[tuple[float, float, float], ...] | None = None
     """Start poses (world frame) overriding the scenario's; robots beyond them get
     automatic starts."""
+    randomize_starts: bool = False
+    """If true, every ``reset`` draws fresh start poses (robot 0 anywhere a robot can start
+    in the region of the scenario's first start, the others as automatic starts), from
+    the reset's seed; ``starts`` is then ignored."""
+    randomize_world: bool = False
+    """If true and the scenario is a parametric family given by name (``"procedural"``,
+    ``"procedural-7"``), every ``reset`` builds a fresh layout ``<family>-<k>`` with ``k``
+    drawn from the reset's seed."""
+    flat_observation: bool = False
+    """If true, each robot's observation is one normalised float32 vector instead of the
+    ``Dict`` (layout in :mod:`mrslam_env.wrappers`)."""
+    flat_length_scale: float = 50.0
+    """Length (m) that divides the ``odom`` and ``pose`` positions in the flat
+    observation (clipped to [-1, 1])."""
 
     def __post_init__(self) -> None:
-        check_fields(self, positive=("dt",), counts=("physics_substeps", "max_cycles"))
+        check_fields(
+            self,
+            positive=("dt", "flat_length_scale"),
+            counts=("physics_substeps", "max_cycles"),
+        )
+        for name in ("randomize_starts", "randomize_world", "flat_observation"):
+            value = getattr(self, name)
+            require("EnvConfig", name, value, isinstance(value, bool), "a bool")
         if self.starts is not None:
             require("EnvConfig", "starts", self.starts, len(self.starts) > 0, "None or non-empty")
             for i, start in enumerate(self.starts):

@@ -1,15 +1,18 @@
 """MultiRobotSlam: lidar robots exploring a 2-D world with an unknown relative pose.
 
 =====================  ===========================================================
-Import                 ``from mrslam_env import parallel_env``
+Import                 ``from mrslam_env import parallel_env`` (AEC: ``mrslam_env.env()``)
 PettingZoo id          ``"mrslam/MultiRobotSlam-v0"`` (registered on import of
                        ``mrslam_env.env``; ``pettingzoo.make("parallel", ...)``)
+Gymnasium id           ``"mrslam/SingleRobot-v0"`` (robot_0 learns, teammates scripted;
+                       :mod:`mrslam_env.wrappers`)
 Actions                Continuous
 Parallel API           Yes (AEC through :func:`env`)
+State                  ``state()`` / ``state_space`` (all robots' flat observations)
 Agents                 ``robot_0 ... robot_{n-1}`` (default n = 2)
 Action shape           (2,)
 Action values          [-1, 1]
-Observation            ``Dict`` (below)
+Observation            ``Dict`` (below), or a flat normalised ``Box``
 =====================  ===========================================================
 
 Two (or N) differential-drive robots with 360° lidars move in a static 2-D world simulated
@@ -47,6 +50,14 @@ local_map   Box(0, 1, (2, S, S),   egocentric crop of the robot's own map, centr
                                    ``S = local_map.cells`` (64) of ``cell_size`` (0.1 m)
 ==========  =====================  =======================================================
 
+``EnvConfig(flat_observation=True)`` replaces the ``Dict`` by one float32 vector per robot,
+every entry in [0, 1] or [-1, 1]: scan / max_range, odom (positions /
+``flat_length_scale``, clipped; heading / pi), peer (detected, range / detect_range,
+angles / pi), comm, pose, local_map as 0/1; the order and slices are in
+:mod:`mrslam_env.wrappers` (``ObservationFlattener.layout()``). ``state()`` is that vector
+for every robot, concatenated in ``possible_agents`` order (for centralised critics; no
+privileged data), whatever the observation setting.
+
 ``pose`` and ``local_map`` exist when onboard SLAM is on (``config.slam``, the default).
 Each robot runs :class:`~mrslam_env.slam.slam.RobotSlam` on its own ``odom`` and ``scan``
 (minus the returns from robots its peer sensor detects: they are not part of the map)
@@ -58,27 +69,50 @@ object itself (trajectory, grid).
 Rewards
 -------
 ``area_weight *`` the area (m²) that became known (FREE or OCCUPIED) in the robot's own map
-this step ``- collision_penalty`` on steps with a contact. With ``config.slam = None`` the
-area is what the robot's scan observed for the first time from its true pose, counted on a
-world-frame grid of ``coverage_resolution``.
+this step for the first time in the episode ``+ team_novelty_weight *`` the area the robot
+covered this step that no robot had covered before it ``- collision_penalty`` on steps
+with a contact. Each cell pays once: one that drifts back to unknown and is known again
+pays nothing, so the reward is never negative without a collision. With
+``config.slam = None`` the own area is what the robot's scan observed for the first time
+from its true pose, counted on a world-frame grid of ``coverage_resolution``. Team novelty
+(default weight 0) is counted on that common world-frame grid, with the robots' maps
+placed by their true start poses: it uses privileged data to shape the reward, never the
+observation. Cells that two robots cover first in the same step pay both.
 
 Episode end
 -----------
-No termination; truncation of all robots after ``config.max_cycles`` steps.
+No termination; truncation of all robots after ``max_cycles`` steps.
+
+Episodes
+--------
+``reset(seed, options)`` takes ``options={"scenario": name or WorldSpec}`` (switch worlds
+from this episode on) and ``{"randomize_starts": True}`` (robot 0 at a random start cell
+of the scenario's region, random heading; the others automatic). ``EnvConfig`` switches
+``randomize_starts`` and ``randomize_world`` (a parametric family such as ``"procedural"``:
+a fresh layout every reset) do that for every episode. All draws come from the reset's
+seed: the same seed gives the same episode. Other option keys are ignored.
 
 Infos (per robot)
 -----------------
-``true_pose`` (3,) world-frame pose: **privileged**, for evaluation only, never for a
-policy that claims not to know it; ``collision`` (bool); ``observed_area`` (m², so far:
-the known area of the robot's map, or with SLAM off the area seen from the true poses).
+``collision`` (bool); ``observed_area`` (m², so far: the known area of the robot's map, or
+with SLAM off the area seen from the true poses); ``new_area`` (m², this step's own area
+reward before weighting); ``privileged``, a dict of ground-truth figures for evaluation
+and reward shaping only, never for a policy that claims not to know them: ``true_pose``
+(3,) world-frame pose, ``covered_area`` / ``team_covered_area`` (m² of the common
+world-frame grid covered by the robot / by any robot), ``coverage`` / ``team_coverage``
+(those over ``observable_area``) and ``team_new_area`` (m², this step's team novelty).
+``true_pose`` at the top level is the same privileged pose, kept for existing callers.
 
 Arguments
 ---------
-``parallel_env(scenario="office", n_robots=2, seed=None, render_mode=None, config=None)``:
-``scenario`` is a name (``mrslam scenarios`` lists them; ``"procedural-7"`` picks a layout
-seed) or a :class:`~mrslam_env.sim.world.WorldSpec` (e.g. from a ROS map);
-``seed`` seeds the first ``reset`` when it is given none; ``render_mode`` is ``None`` or
-``"rgb_array"``; ``config`` an :class:`~mrslam_env.config.EnvConfig`.
+``parallel_env(scenario="office", n_robots=2, seed=None, render_mode=None, config=None,
+max_cycles=None)``: ``scenario`` is a name (``mrslam scenarios`` lists them;
+``"procedural-7"`` picks a layout seed) or a :class:`~mrslam_env.sim.world.WorldSpec` (e.g.
+from a ROS map); ``seed`` seeds the first ``reset`` when it is given none; ``render_mode``
+is ``None``, ``"rgb_array"`` or ``"human"`` (the frame in a matplotlib window; without a
+display or matplotlib it warns once and draws nothing; ``render()`` returns None);
+``config`` an :class:`~mrslam_env.config.EnvConfig`; ``max_cycles`` overrides
+``config.max_cycles``. ``env(...)`` takes the same arguments.
 
 Pickling
 --------
@@ -89,12 +123,18 @@ physics space the same way; the original's next steps are unchanged otherwise.)
 Version history
 ---------------
 * v0: initial release; onboard SLAM (``pose``, ``local_map``, map-based reward) added
-  before the first tagged version.
+  before the first tagged version; then (still v0) flat observations, ``state()``,
+  ``max_cycles`` keyword, ``"human"`` rendering, once-per-cell area reward with team
+  novelty, ``privileged`` infos, varying episodes.
 """
 
 from __future__ import annotations
 
 import functools
+import os
+import sys
+import types
+from dataclasses import replace
 from typing import Any, ClassVar
 
 import gymnasium
@@ -111,13 +151,15 @@ from mrslam_env import ENV_ID
 from mrslam_env.config import EnvConfig
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import GridMap
-from mrslam_env.registry import build_world
+from mrslam_env.registry import available_scenarios, build_world
 from mrslam_env.sim.simulator import SimState, Simulator
+from mrslam_env.sim.starts import world_start_points
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
 from mrslam_env.slam.local_map import local_map
 from mrslam_env.slam.raycast import mark_scan_observed
 from mrslam_env.slam.scan import mask_returns_near, sighted_positions
 from mrslam_env.slam.slam import RobotSlam
+from mrslam_env.wrappers import ObservationFlattener
 
 __all__ = ["MultiRobotSlamEnv", "env", "parallel_env"]
 
@@ -135,7 +177,7 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
 
     metadata: ClassVar[dict[str, Any]] = {
         "name": "mrslam_v0",
-        "render_modes": ["rgb_array"],
+        "render_modes": ["human", "rgb_array"],
         "render_fps": 10,
         "is_parallelizable": True,
     }
@@ -147,6 +189,7 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         seed: int | None = None,
         render_mode: str | None = None,
         config: EnvConfig | None = None,
+        max_cycles: int | None = None,
     ) -> None:
         if not isinstance(n_robots, int) or n_robots < 1:
             raise ValueError(f"n_robots must be an int >= 1, got {n_robots!r}")
@@ -157,8 +200,11 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
             )
         if not isinstance(scenario, str | WorldSpec):
             raise ValueError(f"scenario must be a scenario name or a WorldSpec, got {scenario!r}")
+        self.scenario = scenario
         self.world = scenario if isinstance(scenario, WorldSpec) else build_world(scenario)
         self.config = config if config is not None else EnvConfig()
+        if max_cycles is not None:
+            self.config = replace(self.config, max_cycles=max_cycles)
         self.render_mode = render_mode
         self.possible_agents = [f"robot_{i}" for i in range(n_robots)]
         self.agents = list(self.possible_agents)
@@ -170,11 +216,21 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         self._sim: Simulator | None = None
         self._slams: list[RobotSlam] = []
         self._render_base: NDArray[np.uint8] | None = None
+        self._window: Any = None
+        self._flattener = ObservationFlattener(self.config, n_robots)
+        if self.config.randomize_world and parametric_family(scenario) is None:
+            raise ValueError(
+                "EnvConfig.randomize_world needs a parametric scenario family by name "
+                f"(e.g. 'procedural'), got {scenario!r}"
+            )
+        self._dict_observations: dict[AgentID, ObsDict] = {}
 
     # --- spaces -------------------------------------------------------------------------
 
     @functools.cache  # noqa: B019 - one space object per agent, as the API expects
-    def observation_space(self, agent: AgentID) -> spaces.Dict:
+    def observation_space(self, agent: AgentID) -> spaces.Space[Any]:
+        if self.config.flat_observation:
+            return self._flattener.space
         lidar, peer = self.config.lidar, self.config.peer
         others = len(self.possible_agents) - 1
         inf = np.inf
@@ -201,6 +257,23 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
     def action_space(self, agent: AgentID) -> spaces.Box:
         return spaces.Box(-1.0, 1.0, (2,), np.float32)
 
+    @functools.cached_property
+    def state_space(self) -> spaces.Box:
+        """The :meth:`state` space: the flat observation space, once per robot."""
+        n = len(self.possible_agents)
+        flat = self._flattener.space
+        return spaces.Box(np.tile(flat.low, n), np.tile(flat.high, n), dtype=np.float32)
+
+    def state(self) -> NDArray[np.float32]:
+        """Global state for centralised critics: every robot's flat observation
+        (:mod:`mrslam_env.wrappers` layout) concatenated in ``possible_agents`` order,
+        whatever ``config.flat_observation`` is. No privileged data."""
+        if self._sim is None:
+            raise RuntimeError("state() called before reset()")
+        return np.concatenate(
+            [self._flattener(self._dict_observations[a]) for a in self.possible_agents]
+        )
+
     # --- the episode --------------------------------------------------------------------
 
     def reset(
@@ -211,12 +284,37 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
             seed = self._initial_seed
         if seed is not None:
             self.np_random, self.np_random_seed = seeding.np_random(seed)
+        options = dict(options or {})  # other keys are ignored, as PettingZoo expects
+        if "scenario" in options:
+            scenario = options["scenario"]
+            if not isinstance(scenario, str | WorldSpec):
+                raise ValueError(
+                    f"scenario must be a scenario name or a WorldSpec, got {scenario!r}"
+                )
+            if self.config.randomize_world and parametric_family(scenario) is None:
+                raise ValueError(
+                    "EnvConfig.randomize_world needs a parametric scenario family by name "
+                    f"(e.g. 'procedural'), got {scenario!r}"
+                )
+            self._set_world(scenario)
+        elif self.config.randomize_world:
+            family = parametric_family(self.scenario)
+            assert family is not None  # checked by the constructor
+            self._set_world(f"{family}-{int(self.np_random.integers(1_000_000))}", keep=True)
+        config = self.config
+        if options.get("randomize_starts", config.randomize_starts):
+            config = replace(config, starts=random_starts(self.world, config, self.np_random))
         self.agents = list(self.possible_agents)
-        self._sim = Simulator(self.world, len(self.possible_agents), self.config, self.np_random)
+        self._sim = Simulator(self.world, len(self.possible_agents), config, self.np_random)
         # Cells outside the robots' enclosure count as seen from the start: a no-return
         # beam (reported at max range) passes through walls and must not earn area there.
         observable = observable_cells(self._coverage_template, self._sim.starts)
         self._observed = [~observable for _ in self.possible_agents]
+        self._team_observed = ~observable
+        self._unobservable_cells = int((~observable).sum())
+        self._ever_known: list[tuple[tuple[int, int], NDArray[np.bool_]]] = []
+        self._new_area = np.zeros(len(self.possible_agents))
+        self._team_new_area = np.zeros(len(self.possible_agents))
         self._observable_area = float(observable.sum()) * self._coverage_template.resolution**2
         self._observed_area = np.zeros(len(self.possible_agents))
         self.steps = 0
@@ -252,6 +350,7 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         rewards = {
             agent: float(
                 reward_config.area_weight * new_area[i]
+                + reward_config.team_novelty_weight * self._team_new_area[i]
                 - reward_config.collision_penalty * state.collisions[i]
             )
             for i, agent in enumerate(self.possible_agents)
@@ -288,13 +387,29 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         return commands
 
     def _count_new_area(self, state: SimState) -> NDArray[np.float64]:
-        """Update what each robot has seen; the area (m²) it saw for the first time."""
-        if self._slams:
-            return self._update_slam(state)
+        """Update what each robot has seen; the area (m²) it knows for the first time.
+
+        Also updates the common world-frame coverage grid (``coverage_resolution``): each
+        robot's covered cells (``self._observed``), the team's (``self._team_observed``)
+        and ``self._team_new_area``, the area each robot covered that no robot had
+        covered before this step.
+        """
         grid = self._coverage_template
-        new_cells = np.array(
-            [
-                mark_scan_observed(
+        team_before = self._team_observed.copy()
+        newly_covered = []
+        if self._slams:
+            area = self._update_slam(state)
+            for i, cells in enumerate(self._newly_known_world_cells):
+                fresh = np.zeros_like(team_before)
+                fresh[cells[:, 0], cells[:, 1]] = True
+                fresh &= ~self._observed[i]
+                self._observed[i] |= fresh
+                newly_covered.append(fresh)
+        else:
+            area = np.zeros(len(self.possible_agents))
+            for i, (pose, scan) in enumerate(zip(state.true_poses, state.scans, strict=True)):
+                before = self._observed[i].copy()
+                new_cells = mark_scan_observed(
                     self._observed[i],
                     grid.origin[0],
                     grid.origin[1],
@@ -304,29 +419,78 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
                     pose[2],
                     scan,
                 )
-                for i, (pose, scan) in enumerate(zip(state.true_poses, state.scans, strict=True))
-            ],
-            dtype=np.float64,
-        )
-        area = new_cells * grid.resolution**2
-        self._observed_area += area
+                area[i] = new_cells * grid.resolution**2
+                newly_covered.append(self._observed[i] & ~before)
+            self._observed_area += area
+        cell_area = grid.resolution**2
+        for i, fresh in enumerate(newly_covered):
+            self._team_new_area[i] = float((fresh & ~team_before).sum()) * cell_area
+            self._team_observed |= fresh
+        self._new_area = area
         return area
 
     def _update_slam(self, state: SimState) -> NDArray[np.float64]:
-        """One SLAM update per robot; the growth of each robot's mapped area (m²)."""
+        """One SLAM update per robot; the area (m²) of the cells of its map that are known
+        (FREE or OCCUPIED) for the first time this episode. A cell that turns back to
+        unknown (log-odds drifting back over the thresholds) and known again pays once,
+        so the reward is never negative without a collision."""
         assert self._sim is not None
         ground_truth = self.config.slam is not None and self.config.slam.mode == "ground_truth"
         area = np.zeros(len(self._slams))
+        self._newly_known_world_cells = []
         for i, slam in enumerate(self._slams):
             grid = slam.grid
-            known_before = grid.known_cells
             true_pose_in_map = None
             if ground_truth:
                 true_pose_in_map = compose(inverse(self._sim.starts[i]), state.true_poses[i])
             slam.update(state.odometry[i], self._scan_without_peers(state, i), true_pose_in_map)
-            area[i] = (grid.known_cells - known_before) * grid.resolution**2
+            ever = self._ever_known_aligned(i, grid)
+            config = grid.config
+            log_odds = grid.log_odds
+            known = (log_odds < config.free_threshold) | (log_odds > config.occupied_threshold)
+            new = known & ~ever
+            ever |= new
+            cells = np.argwhere(new)
+            area[i] = len(cells) * grid.resolution**2
             self._observed_area[i] = grid.known_cells * grid.resolution**2
+            self._newly_known_world_cells.append(self._map_cells_to_coverage(i, grid, cells))
         return area
+
+    def _ever_known_aligned(self, i: int, grid: Any) -> NDArray[np.bool_]:
+        """Robot ``i``'s 'ever known' mask, grown with its SLAM grid (same shape and
+        origin)."""
+        origin = (
+            round(grid.origin[1] / grid.resolution),
+            round(grid.origin[0] / grid.resolution),
+        )
+        if i == len(self._ever_known):
+            self._ever_known.append((origin, np.zeros(grid.shape, dtype=bool)))
+        old_origin, mask = self._ever_known[i]
+        if old_origin != origin or mask.shape != grid.shape:
+            grown = np.zeros(grid.shape, dtype=bool)
+            dy, dx = old_origin[0] - origin[0], old_origin[1] - origin[1]
+            grown[dy : dy + mask.shape[0], dx : dx + mask.shape[1]] = mask
+            mask = grown
+            self._ever_known[i] = (origin, mask)
+        return mask
+
+    def _map_cells_to_coverage(
+        self, i: int, grid: Any, cells: NDArray[np.int64]
+    ) -> NDArray[np.int64]:
+        """Cells ``(k, 2)`` of robot ``i``'s map as cells of the world-frame coverage grid
+        (through its true start pose: privileged), those outside dropped."""
+        assert self._sim is not None
+        if len(cells) == 0:
+            return np.empty((0, 2), dtype=np.int64)
+        points = grid.cell_to_world(cells)
+        x, y, theta = self._sim.starts[i]
+        c, s = np.cos(theta), np.sin(theta)
+        world = np.column_stack(
+            [x + c * points[:, 0] - s * points[:, 1], y + s * points[:, 0] + c * points[:, 1]]
+        )
+        coverage = self._coverage_template
+        out = coverage.world_to_cell(world)
+        return np.asarray(out[coverage.contains(out)], dtype=np.int64)
 
     def _scan_without_peers(self, state: SimState, robot: int) -> NDArray[np.float64]:
         """The scan SLAM integrates: returns from the robots the peer sensor detects are
@@ -338,12 +502,12 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         radius = self.config.robot.radius + PEER_MASK_MARGIN
         return mask_returns_near(state.scans[robot], points, radius, self.config.lidar.max_range)
 
-    def _observations(self, state: SimState) -> dict[AgentID, ObsDict]:
+    def _observations(self, state: SimState) -> dict[AgentID, Any]:
+        """Every live robot's observation; the ``Dict`` ones of all robots are kept for
+        :meth:`state`."""
         observations: dict[AgentID, ObsDict] = {}
         crop = self.config.local_map
         for i, agent in enumerate(self.possible_agents):
-            if agent not in self.agents:
-                continue
             observation = {
                 "scan": state.scans[i].astype(np.float32),
                 "odom": state.odometry[i].copy(),
@@ -357,18 +521,48 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
                     slam.grid, slam.pose, crop.cells, crop.cell_size
                 )
             observations[agent] = observation
-        return observations
+        self._dict_observations = observations
+        live = [agent for agent in self.possible_agents if agent in self.agents]
+        if self.config.flat_observation:
+            return {agent: self._flattener(observations[agent]) for agent in live}
+        return {agent: observations[agent] for agent in live}
 
     def _infos(self, state: SimState) -> dict[AgentID, dict[str, Any]]:
-        return {
-            agent: {
-                "true_pose": state.true_poses[i].copy(),
+        cell_area = self._coverage_template.resolution**2
+        observable = max(self._observable_area, 1e-12)
+        team_area = (float(self._team_observed.sum()) - self._unobservable_cells) * cell_area
+        infos = {}
+        for i, agent in enumerate(self.possible_agents):
+            if agent not in self.agents:
+                continue
+            own_area = (float(self._observed[i].sum()) - self._unobservable_cells) * cell_area
+            true_pose = state.true_poses[i].copy()
+            infos[agent] = {
+                "true_pose": true_pose,
                 "collision": bool(state.collisions[i]),
                 "observed_area": float(self._observed_area[i]),
+                "new_area": float(self._new_area[i]),
+                "privileged": {
+                    "true_pose": true_pose.copy(),
+                    "covered_area": own_area,
+                    "coverage": own_area / observable,
+                    "team_covered_area": team_area,
+                    "team_coverage": team_area / observable,
+                    "team_new_area": float(self._team_new_area[i]),
+                },
             }
-            for i, agent in enumerate(self.possible_agents)
-            if agent in self.agents
-        }
+        return infos
+
+    def _set_world(self, scenario: str | WorldSpec, keep: bool = False) -> None:
+        """Switch to another world (for the next episodes); ``keep`` leaves
+        ``self.scenario`` (the family a random layout is drawn from) as it is."""
+        if not keep:
+            self.scenario = scenario
+        self.world = scenario if isinstance(scenario, WorldSpec) else build_world(scenario)
+        self._coverage_template = ground_truth_map(
+            self.world, self.config.reward.coverage_resolution, margin=1.0
+        )
+        self._render_base = None
 
     # --- access for agents, evaluation and recording ---------------------------------------
 
@@ -406,12 +600,45 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
     # --- rendering ----------------------------------------------------------------------
 
     def render(self) -> NDArray[np.uint8] | None:
-        """Top-down ``(H, W, 3)`` uint8 image (y up) of walls, robots and scans."""
+        """``"rgb_array"``: a top-down ``(H, W, 3)`` uint8 image (y up) of walls, robots
+        and scans. ``"human"``: the same image in a matplotlib window (returns None);
+        without a display or matplotlib it warns once and draws nothing."""
         if self.render_mode is None:
             gymnasium.logger.warn("render() called without a render_mode; returning None")
             return None
         if self._sim is None:
             raise RuntimeError("render() called before reset()")
+        frame = self._frame()
+        if self.render_mode == "human":
+            self._show(frame)
+            return None
+        return frame
+
+    def _show(self, frame: NDArray[np.uint8]) -> None:
+        if self._window is None:
+            self._window = False
+            has_display = sys.platform in ("darwin", "win32") or bool(
+                os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+            )
+            try:
+                if not has_display:
+                    raise ImportError("no display")
+                import matplotlib.pyplot as plt
+
+                plt.ion()
+                figure, axes = plt.subplots()
+                axes.set_axis_off()
+                self._window = (plt, figure, axes.imshow(frame))
+            except Exception as error:  # no display, no matplotlib, no GUI backend
+                gymnasium.logger.warn(f"render_mode='human' cannot open a window ({error})")
+        if self._window:
+            plt, figure, image = self._window
+            image.set_data(frame)
+            figure.canvas.draw_idle()
+            plt.pause(1.0 / self.metadata["render_fps"])
+
+    def _frame(self) -> NDArray[np.uint8]:
+        assert self._sim is not None
         xmin, ymin, xmax, ymax = self.world.bounds
         resolution = max(0.025, max(xmax - xmin, ymax - ymin) / 640.0)
         if self._render_base is None:
@@ -453,6 +680,15 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
 
     def close(self) -> None:
         self._render_base = None
+        if self._window:
+            plt, figure, _ = self._window
+            plt.close(figure)
+        self._window = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_window"] = None  # a GUI window does not pickle
+        return state
 
 
 def checked_seed(seed: Any) -> int | None:
@@ -481,6 +717,32 @@ def observable_cells(grid: GridMap, starts: NDArray[np.float64]) -> NDArray[np.b
     return ndimage.binary_dilation(region, structure=np.ones((3, 3), dtype=bool))
 
 
+def parametric_family(scenario: str | WorldSpec) -> str | None:
+    """The parametric scenario family a name belongs to (``"procedural-7"`` ->
+    ``"procedural"``), or None."""
+    if not isinstance(scenario, str):
+        return None
+    catalogue = available_scenarios()
+    family, _, suffix = scenario.rpartition("-")
+    for name in (scenario, family if suffix.isdigit() else ""):
+        if name in catalogue and catalogue[name].parametric:
+            return name
+    return None
+
+
+def random_starts(
+    world: WorldSpec, config: EnvConfig, rng: np.random.Generator
+) -> tuple[tuple[float, float, float], ...]:
+    """A random start for robot 0 (a start cell reachable from the world's first start,
+    uniform heading); the others are then automatic starts."""
+    candidates = world_start_points(world, config.robot.radius, world.starts[0][:2])
+    if len(candidates) == 0:
+        x, y, theta = (float(v) for v in world.starts[0])
+        return ((x, y, theta),)
+    x, y = candidates[int(rng.integers(len(candidates)))]
+    return ((float(x), float(y), float(rng.uniform(-np.pi, np.pi))),)
+
+
 def parallel_env(**kwargs: Any) -> MultiRobotSlamEnv:
     """Create the parallel environment; arguments as :class:`MultiRobotSlamEnv`."""
     return MultiRobotSlamEnv(**kwargs)
@@ -494,3 +756,16 @@ def env(**kwargs: Any) -> pettingzoo.AECEnv[AgentID, ObsDict, NDArray[np.float32
 if ENV_ID not in pettingzoo.parallel_registry:
     pettingzoo.register("parallel", ENV_ID, entry_point="mrslam_env.env:parallel_env")
     pettingzoo.register("aec", ENV_ID, entry_point="mrslam_env.env:env")
+
+
+class _CallableModule(types.ModuleType):
+    """``mrslam_env.env`` is both this module and the AEC constructor: once the module is
+    imported, ``from mrslam_env import env`` finds the module (Python sets the package
+    attribute), and calling it builds the AEC env (as PettingZoo's ``max_cycles_test``
+    and ``api_test`` expect of ``mrslam_env.env(...)``)."""
+
+    def __call__(self, **kwargs: Any) -> pettingzoo.AECEnv[AgentID, ObsDict, NDArray[np.float32]]:
+        return env(**kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule

@@ -52,7 +52,9 @@ FLOAT_FIELDS = {
     (RewardConfig, "area_weight"): "non_negative",
     (RewardConfig, "collision_penalty"): "non_negative",
     (RewardConfig, "coverage_resolution"): "positive",
+    (RewardConfig, "team_novelty_weight"): "non_negative",
     (EnvConfig, "dt"): "positive",
+    (EnvConfig, "flat_length_scale"): "positive",
 }
 
 BAD_VALUES = {

@@ -94,11 +94,15 @@ def test_a_signal_ends_the_run_in_one_line_with_its_exit_status(
     capsys, monkeypatch, tmp_path: Path, signum: int, status: int
 ) -> None:
     interrupt_at(monkeypatch, 11, lambda: os.kill(os.getpid(), signum))
-    previous = signal.getsignal(signal.SIGTERM)
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    # Python's own Ctrl-C handler, as in a console script (a test runner's worker may
+    # have replaced it).
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         code = main(["run", "--max-steps", "100", "--no-record", "--out", str(tmp_path)])
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
     err = capsys.readouterr().err
     assert code == status
     name = signal.Signals(signum).name
