@@ -699,6 +699,29 @@ class TeamCoordinator:
         self._received = [m1, m0]
         self._fuse(maps, shared=True)
 
+    def start_coordinated(self, transform: FloatArray, maps: MapSource) -> None:
+        """Skip merging and verification: coordinate from now on with a known
+        ``map0_from_map1`` (the benchmark's oracle, given the true relative pose).
+
+        What follows is the coordination that follows a verified merge; the robots'
+        current maps count as exchanged (at the start, one scan each).
+        """
+        transform = np.asarray(transform, dtype=np.float64).copy()
+        self.preliminary_transform = transform.copy()
+        self.transform = transform
+        self.step_verified = self.step
+        self._last_refine_step = self.step
+        self._verified_at = self._last_poses[1][:2].copy()
+        self.hypotheses = []
+        self.rendezvous = None
+        self._decide("relative pose given (oracle): coordinated exploration on the merged map")
+        for explorer in self.explorers:
+            explorer.clear_goal()
+        self.explorers[1].change_frame(transform)
+        self.state = TeamState.COORDINATED_EXPLORATION
+        self._received = [maps(1), maps(0)]
+        self._fuse(maps, shared=True)
+
     def _reject(self, rendezvous: _Rendezvous, maps: MapSource, why: str) -> None:
         self._decide(f"hypothesis #{rendezvous.index} rejected: {why}")
         self.rejected.append(rendezvous.hypothesis)

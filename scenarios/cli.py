@@ -5,7 +5,7 @@
 ``mrslam scenarios``           list worlds; ``--export NAME OUT.yaml`` writes a floor plan
 ``mrslam bench sim``           simulator speed, side by side with IR-SIM
 ``mrslam bench slam``          onboard SLAM accuracy (ATE, map agreement) and speed
-``mrslam bench explore``       time to 90 % coverage, coordinated against independent robots
+``mrslam bench explore``       time to 90 % coverage: team, independent, oracle, one robot
 ``mrslam bench soak``          one long run with SLAM and the team: steps/s and memory
 ``mrslam bench merge``         map merging: our pipeline against the random walk alone and
                                the ROS map_merge feature baseline, on simulated map pairs
@@ -129,17 +129,29 @@ def _build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--no-irsim", action="store_true", help="skip the IR-SIM comparison")
     sim.add_argument("--json", action="store_true")
     slam = kinds.add_parser("slam", help="onboard SLAM: ATE against odometry, map agreement, speed")
-    slam.add_argument("--scenarios", nargs="*", help="scenario names (default: the built-in five)")
+    slam.add_argument(
+        "--scenarios",
+        nargs="*",
+        help="scenario names (default: the built-in five and the six real buildings)",
+    )
     slam.add_argument("--steps", type=int, default=3000, help="env steps per run (default 3000)")
     slam.add_argument("--seed", type=_seed, default=0)
     slam.add_argument("--json", action="store_true")
     explore = kinds.add_parser(
-        "explore", help="time to 90% coverage with coordination against independent robots"
+        "explore",
+        help="time to 90% coverage: the team against independent robots, the oracle "
+        "(relative pose known) and one robot alone",
     )
     explore.add_argument("--scenarios", nargs="*", help="scenario names (default: built-in five)")
     explore.add_argument("--seeds", type=int, default=5, help="seeds 0..N-1 (default 5)")
     explore.add_argument("--max-steps", type=int, default=4000, help="per run (default 4000)")
     explore.add_argument("--jobs", type=int, default=1, help="runs at a time (default 1)")
+    explore.add_argument(
+        "--modes",
+        default="team,independent,oracle,single",
+        help="comma-separated runs per scenario and seed, of team, independent, oracle, "
+        "single (default: all four)",
+    )
     explore.add_argument("--json", action="store_true")
     soak = kinds.add_parser(
         "soak", help="one long run with SLAM and the team: steps/s and memory over time"
@@ -152,12 +164,51 @@ def _build_parser() -> argparse.ArgumentParser:
     merge = kinds.add_parser(
         "merge", help="map merging: success, wrong answers, refusals and time per method"
     )
-    merge.add_argument("--pairs", type=int, default=40, help="map pairs (default 40)")
+    merge.add_argument(
+        "--pairs", type=int, default=40, help="pairs of the built-in or custom set (default 40)"
+    )
+    merge.add_argument(
+        "--set",
+        choices=("both", "builtin", "real"),
+        default="both",
+        help="default pair sets: the built-in worlds (--pairs), the real buildings "
+        "(--real-pairs), or both side by side (default); ignored with --worlds/--maps",
+    )
+    merge.add_argument(
+        "--real-pairs", type=int, default=24, help="pairs of the real-building set (default 24)"
+    )
+    merge.add_argument(
+        "--worlds",
+        nargs="+",
+        metavar="NAME",
+        help="one custom set (--pairs) from these scenarios (built-in or real buildings)",
+    )
+    merge.add_argument(
+        "--maps",
+        nargs="+",
+        type=Path,
+        metavar="MAP.yaml",
+        help="one custom set (--pairs) also from worlds built from these ROS map files",
+    )
+    merge.add_argument(
+        "--native-resolution",
+        action="store_true",
+        help="custom set: run the SLAM at each map's own resolution (the real-building set "
+        "always does; default: the SLAM's 0.05 m)",
+    )
+    merge.add_argument(
+        "--variants",
+        default="pad4000,yaw,res",
+        help="variants ours and ours-crop also run on, on every set but the built-in one: "
+        "pad4000, yaw, "
+        "res, comma-separated, or none (default: pad4000,yaw,res)",
+    )
     merge.add_argument("--seed", type=_seed, default=0)
     merge.add_argument(
         "--methods",
         default="ours,random-walk,features",
-        help="comma-separated methods (default: ours,random-walk,features)",
+        help="comma-separated methods: ours, ours-crop, random-walk, features, hough "
+        "(default: ours,random-walk,features)",
     )
     merge.add_argument("--regenerate", action="store_true", help="rebuild the cached pairs")
     merge.add_argument(
@@ -425,16 +476,22 @@ def _cmd_bench_soak(args: argparse.Namespace) -> int:
 def _cmd_bench_explore(args: argparse.Namespace) -> int:
     from scenarios.bench.explore import (
         DEFAULT_SCENARIOS,
+        MODES,
         format_explore_table,
         run_explore_benchmark,
     )
 
     if args.seeds < 1 or args.max_steps < 1 or args.jobs < 1:
         raise ValueError("--seeds, --max-steps and --jobs must be >= 1")
+    modes = [mode.strip() for mode in args.modes.split(",") if mode.strip()]
+    unknown = [mode for mode in modes if mode not in MODES]
+    if not modes or unknown:
+        raise ValueError(f"--modes must name some of {', '.join(MODES)}, got {args.modes!r}")
     rows, runs = run_explore_benchmark(
         args.scenarios or DEFAULT_SCENARIOS,
         range(args.seeds),
         args.max_steps,
+        modes=modes,
         jobs=args.jobs,
         progress=None if args.json else lambda text: print(text, file=sys.stderr),
     )
@@ -448,57 +505,121 @@ def _cmd_bench_explore(args: argparse.Namespace) -> int:
 def _cmd_bench_merge(args: argparse.Namespace) -> int:
     from scenarios.bench.merge.aliasing import load_or_compute_aliasing
     from scenarios.bench.merge.methods import resolve_methods
-    from scenarios.bench.merge.pairs import PairGenerationConfig, load_or_generate_pairs
+    from scenarios.bench.merge.pairs import (
+        REAL_WORLDS,
+        PairGenerationConfig,
+        load_or_generate_pairs,
+    )
     from scenarios.bench.merge.report import (
         format_aliasing_breakdown,
+        format_family_breakdown,
         format_merge_table,
         format_scenario_breakdown,
         format_twin_breakdown,
         summarize,
         write_rows,
     )
-    from scenarios.bench.merge.run import run_merge_benchmark
+    from scenarios.bench.merge.run import VARIANTS, run_merge_benchmark
     from scenarios.bench.merge.twins import load_or_compute_world_twins
 
     names = [name.strip() for name in args.methods.split(",") if name.strip()]
     if not names:
         raise ValueError("--methods names no method")
-    if args.pairs < 1:
-        raise ValueError(f"--pairs must be >= 1, got {args.pairs}")
+    for option, count in (("--pairs", args.pairs), ("--real-pairs", args.real_pairs)):
+        if count < 1:
+            raise ValueError(f"{option} must be >= 1, got {count}")
+    variants = [v.strip() for v in args.variants.split(",") if v.strip() and v.strip() != "none"]
+    for variant in variants:
+        if variant not in VARIANTS:
+            raise ValueError(f"unknown variant {variant!r}; variants are {', '.join(VARIANTS)}")
     methods, skipped = resolve_methods(names)
 
     def progress(message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 
-    config = PairGenerationConfig(n_pairs=args.pairs, seed=args.seed)
-    pairs, manifest = load_or_generate_pairs(
-        config, args.cache, regenerate=args.regenerate, progress=progress
-    )
-    rows = run_merge_benchmark(pairs, methods, seed=args.seed, progress=progress)
-    if not args.no_aliasing:
-        folder = Path(args.cache) / config.cache_key()
-        labels = load_or_compute_aliasing(pairs, folder, progress=progress)
+    # (title, config, variants); the built-in set's config is the historical default, so
+    # its cache key and figures stay comparable across releases
+    sets: list[tuple[str, PairGenerationConfig, list[str]]] = []
+    if args.worlds or args.maps:
+        config = PairGenerationConfig(
+            n_pairs=args.pairs,
+            seed=args.seed,
+            worlds=tuple(args.worlds or ()),
+            maps=tuple(str(path) for path in args.maps or ()),
+            native_resolution=args.native_resolution,
+        )
+        sets.append((f"custom: {', '.join(config.labels())}", config, variants))
+    else:
+        if args.set in ("both", "builtin"):
+            config = PairGenerationConfig(n_pairs=args.pairs, seed=args.seed)
+            sets.append(("built-in worlds", config, []))
+        if args.set in ("both", "real"):
+            config = PairGenerationConfig(
+                n_pairs=args.real_pairs, seed=args.seed, worlds=REAL_WORLDS, native_resolution=True
+            )
+            sets.append(("real buildings", config, variants))
+
+    all_rows: list[dict[str, Any]] = []
+    results = []
+    for title, config, set_variants in sets:
+        pairs, manifest = load_or_generate_pairs(
+            config, args.cache, regenerate=args.regenerate, progress=progress
+        )
+        rows = run_merge_benchmark(
+            pairs, methods, seed=args.seed, variants=set_variants, progress=progress
+        )
+        if not args.no_aliasing:
+            folder = Path(args.cache) / config.cache_key()
+            labels = load_or_compute_aliasing(pairs, folder, progress=progress)
+            for row in rows:
+                found = labels.get(row["pair_id"])
+                row["aliasing"] = None if found is None else found.label
+                row["aliasing_ratio"] = None if found is None else found.ratio
+                row["aliasing_dominated"] = None if found is None else found.dominated
+            twins = load_or_compute_world_twins(
+                pairs, folder, worlds=config.world, progress=progress
+            )
+            for row in rows:
+                twin = twins.get(row["pair_id"])
+                row["undecidable"] = None if twin is None else twin.undecidable
+                row["twin_overlap"] = None if twin is None else twin.twin_overlap
+        bases = [m for m in ("ours", "ours-crop") if m in methods]
+        columns = list(methods) + [f"{m}+{v}" for v in set_variants for m in bases]
         for row in rows:
-            found = labels.get(row["pair_id"])
-            row["aliasing"] = None if found is None else found.label
-            row["aliasing_ratio"] = None if found is None else found.ratio
-            row["aliasing_dominated"] = None if found is None else found.dominated
-        twins = load_or_compute_world_twins(pairs, folder, progress=progress)
-        for row in rows:
-            twin = twins.get(row["pair_id"])
-            row["undecidable"] = None if twin is None else twin.undecidable
-            row["twin_overlap"] = None if twin is None else twin.twin_overlap
-    summary = summarize(rows, list(methods))
+            row["pair_set"] = title
+        all_rows.extend(rows)
+        results.append((title, pairs, manifest, rows, summarize(rows, columns), columns))
+
+    first = results[0]
     generation = {
-        "pairs": len(pairs),
-        "generation_seconds": manifest["generation_seconds"],
-        "shortfall": manifest["shortfall"],
+        "pairs": sum(len(r[1]) for r in results),
+        "generation_seconds": sum(r[2]["generation_seconds"] for r in results),
+        "shortfall": sum(r[2]["shortfall"] for r in results),
+    }
+    report = {
+        "summary": first[4],
+        "skipped": skipped,
+        **generation,
+        "sets": {
+            title: {
+                "summary": summary,
+                "pairs": len(pairs),
+                "generation_seconds": manifest["generation_seconds"],
+                "shortfall": manifest["shortfall"],
+            }
+            for title, pairs, manifest, _, summary, _ in results
+        },
     }
     if args.out is not None:
-        write_rows(args.out, rows, {"summary": summary, "skipped": skipped, **generation})
+        write_rows(args.out, all_rows, report)
     if args.json:
-        print(json.dumps({"summary": summary, "skipped": skipped, **generation}, indent=2))
-    else:
+        print(json.dumps(report, indent=2))
+        return 0
+    for number, (title, pairs, manifest, rows, summary, _) in enumerate(results):
+        if number:
+            print()
+        if len(results) > 1 or title.startswith("custom"):
+            print(f"## {title}")
         print(
             f"{len(pairs)} pairs ({sum(p.overlapping() for p in pairs)} overlapping), "
             f"generated in {manifest['generation_seconds']:.0f} s"
@@ -511,6 +632,12 @@ def _cmd_bench_merge(args: argparse.Namespace) -> int:
                 if breakdown:
                     print()
                     print(breakdown)
+    families = {row["family"] for row in all_rows}
+    if len(results) > 1 or len(families) > 1:
+        print()
+        print("## per world family")
+        columns = list(dict.fromkeys(c for result in results for c in result[5]))
+        print(format_family_breakdown(all_rows, columns))
     return 0
 
 

@@ -133,6 +133,13 @@ class RunConfig:
     """False: the robots never interact (independent exploration, the baseline)."""
     comm: bool = True
     """False: the radio link never comes up."""
+    oracle: bool = False
+    """True: the team knows the robots' relative pose from step 0 (the true
+    ``map0_from_map1``, from the env's start poses) and explores coordinated from the
+    start, as after a verified merge: the benchmark's upper bound for coordination."""
+    single: bool = False
+    """True: robot 0 explores alone; robot 1 stays where it started and its map does not
+    count towards coverage (the one-robot baseline; ``t90`` is for the whole floor)."""
     target_coverage: float = 0.95
     """Stop once the robots' maps together cover this fraction of the free area."""
     coverage_every: int = 20
@@ -150,6 +157,8 @@ class RunConfig:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if not 0 < self.target_coverage <= 1:
             raise ValueError(f"target_coverage must be in (0, 1], got {self.target_coverage}")
+        if self.oracle and (self.single or not self.interaction):
+            raise ValueError("oracle needs interaction and two robots (not single)")
 
 
 def resolve_world(scenario: str, map_path: Path | None, seed: int = 0) -> WorldSpec:
@@ -182,7 +191,9 @@ def build_team(config: RunConfig, env_config: EnvConfig) -> TeamCoordinator:
     """The run's team, planning for the env's robots and sensors (``env_config`` is the
     env's own config: its robot radius, speeds, control period and peer sensor range)."""
     team_config = TeamConfig.for_env(
-        env_config, interaction=config.interaction, keep_merges=config.record
+        env_config,
+        interaction=config.interaction and not config.single,
+        keep_merges=config.record,
     )
     return TeamCoordinator.for_env(
         env_config, rng=np.random.default_rng(config.seed), config=team_config
@@ -229,6 +240,11 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
     world_from_maps = [env.simulator.starts[i].copy() for i in range(len(agents))]
     true_transform = compose(inverse(world_from_maps[0]), world_from_maps[1])
     evaluator = CoverageEvaluator(world, env.simulator.starts)
+    if config.oracle:
+        team.start_coordinated(true_transform, maps)
+    # The robots whose maps count towards coverage (single: robot 0 alone).
+    counted = [0] if config.single else list(range(len(agents)))
+    idle = np.zeros(2, dtype=np.float32)
     recording_part = run_dir / ".recording.part.rrd"  # renamed once closed
     recorder = (
         Recorder(recording_part, n_robots=len(agents), map_every=config.map_every)
@@ -261,7 +277,10 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
     try:
         with _progress(config.max_steps, config.progress) as bar:
             while env.agents:
-                actions = team.act([observations[a] for a in agents], maps)
+                if config.single:
+                    actions = [team.explorers[0].act(observations[agents[0]], maps(0)), idle]
+                else:
+                    actions = team.act([observations[a] for a in agents], maps)
                 observations, _rewards, _terms, _truncs, infos = env.step(
                     {agent: actions[i] for i, agent in enumerate(agents)}
                 )
@@ -308,7 +327,9 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                     team.pop_decisions()
                 state = team.state
                 if steps % config.coverage_every == 0 or not env.agents:
-                    covered = evaluator.coverage([maps(0), maps(1)], world_from_maps)
+                    covered = evaluator.coverage(
+                        [maps(i) for i in counted], [world_from_maps[i] for i in counted]
+                    )
                     coverage_curve.append((steps, covered))
                     if recorder is not None:
                         recorder.log_scalar("coverage/team", covered)
@@ -316,7 +337,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                         t90 = steps * env_config.dt
                     if covered >= config.target_coverage:
                         break
-                    if all(e.done for e in team.explorers):
+                    if all(team.explorers[i].done for i in counted):
                         break
     except KeyboardInterrupt as stop:  # Ctrl-C or a signal: keep what was done
         interrupted = getattr(stop, "signal_name", "SIGINT")
@@ -360,7 +381,9 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
         "merged": round(
             evaluator.coverage([merged], [world_from_maps[0]])
             if merged is not None
-            else evaluator.coverage(own_maps, world_from_maps),
+            else evaluator.coverage(
+                [own_maps[i] for i in counted], [world_from_maps[i] for i in counted]
+            ),
             4,
         ),
         **{
@@ -382,6 +405,8 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
         "wall_time": round(wall_time, 3),
         "interaction": config.interaction,
         "comm": config.comm,
+        "oracle": config.oracle,
+        "single": config.single,
         "merge": merge_report,
         "coverage": coverage,
         "t90": None if t90 is None else round(t90, 3),

@@ -237,6 +237,23 @@ def test_short_scenario_run_slam_is_much_better_than_odometry() -> None:
     assert "office" in format_slam_table([row])
 
 
+def test_bench_slam_covers_the_real_buildings() -> None:
+    from scenarios.bench.slam import (
+        BUILT_IN_SCENARIOS,
+        DEFAULT_SCENARIOS,
+        REAL_BUILDINGS,
+        format_slam_table,
+        run_slam_benchmark,
+    )
+
+    assert DEFAULT_SCENARIOS == BUILT_IN_SCENARIOS + REAL_BUILDINGS
+    assert {"aws_warehouse", "bookstore", "small_house", "tb3_sandbox"} <= set(REAL_BUILDINGS)
+    (row,) = run_slam_benchmark(["tb3_sandbox"], steps=200, seed=0)
+    assert row["ate_slam"] < row["ate_odometry"]
+    assert row["map_agreement"] > 0.9
+    assert format_slam_table([row]).splitlines()[2].startswith("tb3_sandbox ")
+
+
 # --- evaluation helpers ---------------------------------------------------------------------
 
 

@@ -1,22 +1,38 @@
 """The exploration benchmark behind ``mrslam bench explore``.
 
 Per scenario and seed, the end-to-end experiment (:func:`scenarios.experiment.run_experiment`)
-runs twice from the same starts: with the team coordinator (merge by virtual robot motion,
-rendezvous verification, coordinated exploration of the merged map) and with the same
-robots exploring independently (no interaction). Reported per scenario:
+runs once per mode, all from the same starts:
 
-====================  ===============================================================
-``t90_coordinated``   mean simulated time (s) until the robots' maps together cover 90 %
-                      of the free area, with coordination; a run that never gets there
-                      counts as its time limit (and is counted in ``unfinished``)
-``t90_independent``   the same without interaction
-``speedup``           ``t90_independent / t90_coordinated``
-``verified``          runs with a verified merge / runs
-``wrong_accepted``    verified merges off by more than 0.5 m or 5° (must be 0)
-``max_error``         largest translation (m) and rotation (°) error of a verified merge
-``faster``            runs in which coordination reached 90 % sooner than the same
-                      seed's independent run
-====================  ===============================================================
+===============  =====================================================================
+``team``         the team coordinator: merge by virtual robot motion, rendezvous
+                 verification, coordinated exploration of the merged map
+``independent``  the same two robots exploring independently (no interaction)
+``oracle``       the relative pose known from step 0 (the true ``map0_from_map1``, from
+                 the env's start poses): coordinated exploration from the start, as after
+                 a verified merge; what coordination could gain at most
+``single``       robot 0 alone (robot 1 stays put, its map does not count)
+===============  =====================================================================
+
+Reported per scenario:
+
+=========================  ==========================================================
+``t90[mode]``              mean simulated time (s) until the maps (of the robots that
+                           count) cover 90 % of the free area; a run that never gets
+                           there counts as its time limit (and in ``unfinished[mode]``)
+``t90_coordinated``        ``t90["team"]``; ``t90_independent``: ``t90["independent"]``
+``speedup``                ``t90_independent / t90_coordinated``
+``oracle_gain_share``      ``(t90_independent - t90_team) / (t90_independent -
+                           t90_oracle)``: the share of the oracle's gain the team gets
+                           (None when the oracle gains nothing)
+``faster``                 team runs that reached 90 % sooner than the same seed's
+                           independent run
+``verified``               team runs with a verified merge / team runs
+``wrong_accepted``         verified merges off by more than 0.10 m or 1° (must be 0)
+``translation_error``      median, p90 and max translation error (m) of the verified
+                           merges; ``rotation_error`` the same in degrees
+``collisions[mode]``       collision steps per run (summed over the moving robots):
+                           median, max, and the median as % of the moving robots' steps
+=========================  ==========================================================
 
 With several scenarios a last row, ``all``, summarises every run.
 
@@ -35,39 +51,80 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from scenarios.experiment import RunConfig, run_experiment
 
-__all__ = ["DEFAULT_SCENARIOS", "format_explore_table", "run_explore_benchmark"]
+__all__ = [
+    "DEFAULT_SCENARIOS",
+    "MODES",
+    "format_explore_table",
+    "is_wrong",
+    "oracle_gain_share",
+    "run_explore_benchmark",
+]
 
 DEFAULT_SCENARIOS = ("office", "warehouse", "maze", "twin_wings", "procedural-0")
-WRONG_TRANSLATION = 0.5
-WRONG_ROTATION_DEG = 5.0
+MODES = ("team", "independent", "oracle", "single")
+WRONG_TRANSLATION = 0.10
+"""A verified merge further off than this (m) is wrong."""
+WRONG_ROTATION_DEG = 1.0
+"""… or further off than this (°)."""
 
 
-def _run(scenario: str, seed: int, max_steps: int, interaction: bool, out: Path) -> dict[str, Any]:
+def is_wrong(translation_error: float, rotation_error_deg: float) -> bool:
+    """Whether a verified merge with these errors (m, °) counts as wrong."""
+    return translation_error > WRONG_TRANSLATION or rotation_error_deg > WRONG_ROTATION_DEG
+
+
+def oracle_gain_share(t_independent: float, t_team: float, t_oracle: float) -> float | None:
+    """``(t_independent - t_team) / (t_independent - t_oracle)``: the share of what knowing
+    the relative pose gains that the team gets; None when the oracle gains nothing."""
+    gain = t_independent - t_oracle
+    if gain <= 0:
+        return None
+    return (t_independent - t_team) / gain
+
+
+def _mode_config(mode: str) -> dict[str, bool]:
+    if mode not in MODES:
+        raise ValueError(f"unknown mode {mode!r}; modes: {', '.join(MODES)}")
+    return {
+        "interaction": mode in ("team", "oracle"),
+        "oracle": mode == "oracle",
+        "single": mode == "single",
+    }
+
+
+def _run(scenario: str, seed: int, max_steps: int, mode: str, out: Path) -> dict[str, Any]:
+    flags = _mode_config(mode)
     config = RunConfig(
         scenario=scenario,
         seed=seed,
         max_steps=max_steps,
         out=out,
-        name=f"{scenario}-{seed}-{'team' if interaction else 'solo'}",
+        name=f"{scenario}-{seed}-{mode}",
         record=False,
         figure=False,
-        interaction=interaction,
         progress=False,
+        interaction=flags["interaction"],
+        oracle=flags["oracle"],
+        single=flags["single"],
     )
     return run_experiment(config)
 
 
-def _task(args: tuple[str, int, int, bool, str]) -> dict[str, Any]:
-    scenario, seed, max_steps, interaction, folder = args
-    report = _run(scenario, seed, max_steps, interaction, Path(folder))
+def _task(args: tuple[str, int, int, str, str]) -> dict[str, Any]:
+    scenario, seed, max_steps, mode, folder = args
+    report = _run(scenario, seed, max_steps, mode, Path(folder))
     merge = report["merge"]
     limit = max_steps * 0.1
+    collisions = report["collision_steps"]
+    moving = ["robot_0"] if mode == "single" else list(collisions)
     return {
         "scenario": scenario,
         "seed": seed,
-        "interaction": interaction,
+        "mode": mode,
         "t90": report["t90"],
         "t90_or_limit": report["t90"] if report["t90"] is not None else limit,
         "verified": merge["verified"],
@@ -76,6 +133,9 @@ def _task(args: tuple[str, int, int, bool, str]) -> dict[str, Any]:
         "hypotheses_tested": merge["hypotheses_tested"],
         "step_verified": merge["step_verified"],
         "coverage": report["coverage"]["merged"],
+        "steps": report["steps"],
+        "collision_steps": sum(collisions[agent] for agent in moving),
+        "robot_steps": report["steps"] * len(moving),
         "wall_time": report["wall_time"],
     }
 
@@ -85,88 +145,146 @@ def run_explore_benchmark(
     seeds: Sequence[int] = range(5),
     max_steps: int = 4000,
     *,
+    modes: Sequence[str] = MODES,
     jobs: int = 1,
     progress: Callable[[str], None] | None = None,
 ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
-    """Run the benchmark (``jobs`` runs at a time, in processes); returns (summary rows
-    per scenario, per-run rows)."""
+    """Run the benchmark (``jobs`` runs at a time, in processes) in the given ``modes``
+    (of :data:`MODES`); returns (summary rows per scenario, per-run rows)."""
+    for mode in modes:
+        _mode_config(mode)
     with tempfile.TemporaryDirectory(prefix="mrslam-bench-explore-") as folder:
         tasks = [
-            (scenario, seed, max_steps, interaction, folder)
+            (scenario, seed, max_steps, mode, folder)
             for scenario in scenarios
             for seed in seeds
-            for interaction in (True, False)
+            for mode in modes
         ]
         runs: list[dict[str, Any]] = []
         with ProcessPoolExecutor(max_workers=jobs) as pool:
             for row in pool.map(_task, tasks):
                 runs.append(row)
                 if progress is not None:
-                    mode = "team" if row["interaction"] else "solo"
-                    progress(f"{row['scenario']} seed {row['seed']} {mode}: t90 {row['t90']}")
+                    progress(
+                        f"{row['scenario']} seed {row['seed']} {row['mode']}: t90 {row['t90']}"
+                    )
     rows = [_summarise(scenario, runs) for scenario in scenarios]
     if len(scenarios) > 1:
         rows.append(_summarise(None, runs))
     return rows, runs
 
 
+def _spread(values: Sequence[float]) -> tuple[float, float, float] | None:
+    """(median, p90, max) of ``values``, or None when there are none."""
+    if not values:
+        return None
+    data = np.asarray(values, dtype=np.float64)
+    return (
+        round(float(np.median(data)), 4),
+        round(float(np.percentile(data, 90)), 4),
+        round(float(np.max(data)), 4),
+    )
+
+
 def _summarise(scenario: str | None, runs: list[dict[str, Any]]) -> dict[str, Any]:
     """The summary row of one scenario, or of all runs (``scenario=None``, named "all")."""
     mine = [r for r in runs if scenario is None or r["scenario"] == scenario]
-    team = [r for r in mine if r["interaction"]]
-    solo = [r for r in mine if not r["interaction"]]
+    by_mode = {mode: [r for r in mine if r["mode"] == mode] for mode in MODES}
+    t90 = {
+        mode: round(statistics.fmean(r["t90_or_limit"] for r in chosen), 1)
+        for mode, chosen in by_mode.items()
+        if chosen
+    }
+    team, solo = by_mode["team"], by_mode["independent"]
     solo_time = {(r["scenario"], r["seed"]): r["t90_or_limit"] for r in solo}
     faster = sum(
         r["t90_or_limit"] < solo_time.get((r["scenario"], r["seed"]), -math.inf) for r in team
     )
     verified = [r for r in team if r["verified"]]
-    wrong = [
-        r
-        for r in verified
-        if r["translation_error"] > WRONG_TRANSLATION or r["rotation_error"] > WRONG_ROTATION_DEG
-    ]
-    t_team = statistics.fmean(r["t90_or_limit"] for r in team)
-    t_solo = statistics.fmean(r["t90_or_limit"] for r in solo)
+    wrong = [r for r in verified if is_wrong(r["translation_error"], r["rotation_error"])]
+    t_team, t_solo, t_oracle = t90.get("team"), t90.get("independent"), t90.get("oracle")
+    share = None
+    if t_team is not None and t_solo is not None and t_oracle is not None:
+        share = oracle_gain_share(t_solo, t_team, t_oracle)
+    collisions: dict[str, dict[str, float]] = {}
+    for mode, chosen in by_mode.items():
+        if not chosen:
+            continue
+        counts = [r["collision_steps"] for r in chosen]
+        shares = [100.0 * r["collision_steps"] / max(r["robot_steps"], 1) for r in chosen]
+        collisions[mode] = {
+            "median": float(statistics.median(counts)),
+            "max": float(max(counts)),
+            "median_percent": round(float(statistics.median(shares)), 3),
+        }
+    translation = _spread([r["translation_error"] for r in verified])
+    rotation = _spread([r["rotation_error"] for r in verified])
     return {
         "scenario": "all" if scenario is None else scenario,
         "runs": len(team),
         "faster": faster,
-        "t90_coordinated": round(t_team, 1),
-        "t90_independent": round(t_solo, 1),
-        "speedup": round(t_solo / t_team, 3) if t_team > 0 else None,
+        "t90": t90,
+        "t90_coordinated": t_team,
+        "t90_independent": t_solo,
+        "speedup": round(t_solo / t_team, 3) if t_team and t_solo is not None else None,
+        "oracle_gain_share": None if share is None else round(share, 3),
+        "unfinished": {
+            mode: sum(r["t90"] is None for r in chosen)
+            for mode, chosen in by_mode.items()
+            if chosen
+        },
         "unfinished_coordinated": sum(r["t90"] is None for r in team),
         "unfinished_independent": sum(r["t90"] is None for r in solo),
         "verified": len(verified),
         "wrong_accepted": len(wrong),
-        "max_translation_error": max((r["translation_error"] for r in verified), default=None),
-        "max_rotation_error": max((r["rotation_error"] for r in verified), default=None),
+        "translation_error": translation,
+        "rotation_error": rotation,
+        "max_translation_error": None if translation is None else translation[2],
+        "max_rotation_error": None if rotation is None else rotation[2],
         "hypotheses_tested": sum(r["hypotheses_tested"] for r in team),
+        "collisions": collisions,
     }
 
 
+def _time(row: dict[str, Any], mode: str) -> str:
+    value = row["t90"].get(mode)
+    if value is None:
+        return "-"
+    unfinished = row["unfinished"].get(mode, 0)
+    return f"{value:.1f}" + (f" ({unfinished}✗)" if unfinished else "")
+
+
 def format_explore_table(rows: Sequence[dict[str, Any]]) -> str:
-    """The summary as a markdown table."""
+    """The summary as a markdown table. A t90 with "(n✗)" includes n runs that never
+    reached 90 % (counted at their time limit)."""
     lines = [
-        "| scenario | t90 coordinated (s) | t90 independent (s) | speed-up | faster | verified | "
-        "wrong accepted | max error (m / °) | hypotheses tested |",
-        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| scenario | t90 team (s) | t90 independent (s) | t90 oracle (s) | t90 single (s) | "
+        "speed-up indep/team | share of oracle gain | faster | verified | wrong accepted | "
+        "error m med / p90 / max | error ° med / p90 / max | "
+        "collision steps team med / max (% steps) | hypotheses tested |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
+        "| ---: | ---: |",
     ]
     for row in rows:
-        if row["max_translation_error"] is None:
-            error = "-"
+        translation, rotation = row["translation_error"], row["rotation_error"]
+        t_error = "-" if translation is None else " / ".join(f"{v:.3f}" for v in translation)
+        r_error = "-" if rotation is None else " / ".join(f"{v:.2f}" for v in rotation)
+        speedup = "-" if row["speedup"] is None else f"{row['speedup']:.2f}×"
+        share = row["oracle_gain_share"]
+        share_text = "-" if share is None else f"{share:.0%}"
+        team_collisions = row["collisions"].get("team")
+        if team_collisions is None:
+            collisions = "-"
         else:
-            error = f"{row['max_translation_error']:.3f} / {row['max_rotation_error']:.2f}"
-        unfinished = ""
-        if row["unfinished_coordinated"] or row["unfinished_independent"]:
-            unfinished = (
-                f" ({row['unfinished_coordinated']}/{row['unfinished_independent']} "
-                "never reached 90 %)"
+            collisions = (
+                f"{team_collisions['median']:.0f} / {team_collisions['max']:.0f} "
+                f"({team_collisions['median_percent']:.1f} %)"
             )
         lines.append(
-            f"| {row['scenario']}{unfinished} | {row['t90_coordinated']:.1f} | "
-            f"{row['t90_independent']:.1f} | {row['speedup']:.2f}× | "
-            f"{row['faster']}/{row['runs']} | "
-            f"{row['verified']}/{row['runs']} | {row['wrong_accepted']} | {error} | "
+            f"| {row['scenario']} | {_time(row, 'team')} | {_time(row, 'independent')} | "
+            f"{_time(row, 'oracle')} | {_time(row, 'single')} | {speedup} | {share_text} | "
+            f"{row['faster']}/{row['runs']} | {row['verified']}/{row['runs']} | "
+            f"{row['wrong_accepted']} | {t_error} | {r_error} | {collisions} | "
             f"{row['hypotheses_tested']} |"
         )
     return "\n".join(lines)
