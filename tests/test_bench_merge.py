@@ -292,7 +292,18 @@ def test_cli_bench_merge_prints_the_table_and_writes_rows(tmp_path, monkeypatch,
     monkeypatch.setattr(merge_pairs, "load_or_generate_pairs", load)
     monkeypatch.setattr(merge_methods, "_METHODS", {"stub": (stub, ())})
     out = tmp_path / "rows.json"
-    argv = ["bench", "merge", "--pairs", "4", "--seed", "5", "--methods", "stub"]
+    argv = [
+        "bench",
+        "merge",
+        "--set",
+        "builtin",
+        "--pairs",
+        "4",
+        "--seed",
+        "5",
+        "--methods",
+        "stub",
+    ]
     assert main([*argv, "--cache", str(tmp_path), "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "4 pairs (3 overlapping), generated in 2 s" in printed
@@ -326,7 +337,8 @@ def test_cli_bench_merge_marks_undecidable_pairs(tmp_path, monkeypatch, capsys) 
         twins, "load_or_compute_world_twins", lambda pairs, folder, **kwargs: {"000-a": twin}
     )
     out = tmp_path / "rows.json"
-    argv = ["bench", "merge", "--pairs", "4", "--methods", "ours", "--cache", str(tmp_path)]
+    argv = ["bench", "merge", "--set", "builtin", "--pairs", "4", "--methods", "ours"]
+    argv += ["--cache", str(tmp_path)]
     assert main([*argv, "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "| overlap ≥ 30%, undecidable | 1 | 0 | 1 | 0 | 0 |" in printed

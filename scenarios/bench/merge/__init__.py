@@ -27,6 +27,20 @@ of the set. Generated pairs are cached as ROS map files plus ``manifest.json`` i
 ``<cache>/<key>/`` where the key holds :data:`GENERATOR_VERSION`, the pair count, the seed
 and a digest of the whole :class:`PairGenerationConfig`.
 
+Real maps
+---------
+The worlds may be real buildings (:mod:`scenarios.worlds.real`, by name) or built from any
+ROS map file (``PairGenerationConfig.maps``, cleaned by
+:func:`~mrslam_env.sim.cleaning.clean_for_simulation`, labelled ``map:<stem>``); pairs are
+generated the same way. With ``native_resolution`` the SLAM runs at the source map's
+resolution (0.02 m for ``aws_warehouse``) instead of its default 0.05 m. ``mrslam bench
+merge`` runs the built-in set (unchanged key) and a real-building set
+(:data:`~scenarios.bench.merge.pairs.REAL_WORLDS`, native resolution) side by side and
+reports them per world family; on every set but the built-in one ``ours`` also runs on
+variants of each pair (map 2 padded to 4000² cells, with an origin yaw, at another
+resolution; :mod:`scenarios.bench.merge.run`), and each pipeline row records whether the
+truth was among its candidates (the proposal recall).
+
 Methods
 -------
 Each is ``(m1, m2, rng) -> map1_from_map2 (3,) or None`` (None = "no confident merge"):
@@ -38,6 +52,9 @@ Each is ``(m1, m2, rng) -> map1_from_map2 (3,) or None`` (None = "no confident m
                  acceptance index reaches :attr:`RandomWalkBaselineConfig.acceptance_threshold`
 ``features``     ROS ``multirobot_map_merge`` (:mod:`scenarios.bench.merge.features`; needs the
                  ``baselines`` extra, i.e. OpenCV)
+``ours-crop``    ours with ``MergeConfig(crop_to_known=True)``
+``hough``        Carpin's Hough-spectrum merger (:mod:`scenarios.bench.merge.hough`); it
+                 answers every pair
 
 A method whose module is missing is reported as skipped, not as an error.
 

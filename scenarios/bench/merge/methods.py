@@ -1,4 +1,5 @@
-"""The merge methods the benchmark compares: ours, the random walk alone, ROS features."""
+"""The merge methods the benchmark compares: ours (also with ``crop_to_known``), the random
+walk alone, ROS features, Carpin's Hough spectrum."""
 
 from __future__ import annotations
 
@@ -76,12 +77,41 @@ class RandomWalkBaselineConfig:
 # Methods
 
 
-def method_ours(m1: GridMap, m2: GridMap, rng: np.random.Generator) -> FloatArray | None:
-    """The project's pipeline, :func:`mrslam_env.merge.pipeline.merge_maps`."""
-    from mrslam_env.merge.pipeline import merge_maps
+@dataclass(frozen=True, slots=True)
+class PipelineMethod:
+    """The project's pipeline, :func:`mrslam_env.merge.pipeline.merge_maps`, as a method;
+    :meth:`answer` also gives every candidate it judged (for the proposal recall).
 
-    result = merge_maps(m1, m2, rng=rng)
-    return None if result.transform is None else np.asarray(result.transform, dtype=np.float64)
+    ``crop_to_known`` sets :attr:`~mrslam_env.merge.pipeline.MergeConfig.crop_to_known`.
+    """
+
+    crop_to_known: bool = False
+
+    def __call__(self, m1: GridMap, m2: GridMap, rng: np.random.Generator) -> FloatArray | None:
+        return self.answer(m1, m2, rng)[0]
+
+    def answer(
+        self, m1: GridMap, m2: GridMap, rng: np.random.Generator
+    ) -> tuple[FloatArray | None, list[FloatArray]]:
+        """The transform (or None) and the candidates: each judged hypothesis's refined
+        transform and its proposal before refinement (confident or not)."""
+        from mrslam_env.merge.pipeline import MergeConfig, merge_maps
+
+        config = MergeConfig(crop_to_known=True) if self.crop_to_known else None
+        result = merge_maps(m1, m2, config, rng=rng)
+        candidates = [
+            np.asarray(transform, dtype=np.float64)
+            for h in result.hypotheses
+            for transform in (h.map1_from_map2, h.initial)
+        ]
+        transform = result.transform
+        return (None if transform is None else np.asarray(transform, dtype=np.float64)), candidates
+
+
+method_ours = PipelineMethod()
+"""The project's pipeline with its default configuration."""
+method_ours_crop = PipelineMethod(crop_to_known=True)
+"""The pipeline with ``MergeConfig(crop_to_known=True)``."""
 
 
 def _random_initial_transform(m1: GridMap, m2: GridMap, rng: np.random.Generator) -> FloatArray:
@@ -170,13 +200,23 @@ def method_features(m1: GridMap, m2: GridMap, rng: np.random.Generator) -> Float
     return estimate_transform_features(m1, m2).transform
 
 
+def method_hough(m1: GridMap, m2: GridMap, rng: np.random.Generator) -> FloatArray | None:
+    """Carpin's Hough-spectrum merger
+    (:func:`scenarios.bench.merge.hough.estimate_transform_hough`, random-walk polish)."""
+    from scenarios.bench.merge.hough import estimate_transform_hough
+
+    return estimate_transform_hough(m1, m2, rng=rng).transform
+
+
 _METHODS: dict[str, tuple[MergeMethod, tuple[str, ...]]] = {
     "ours": (method_ours, ("mrslam_env.merge.pipeline",)),
+    "ours-crop": (method_ours_crop, ("mrslam_env.merge.pipeline",)),
     "random-walk": (
         method_random_walk,
         ("mrslam_env.merge.refine", "mrslam_env.merge.dissimilarity"),
     ),
     "features": (method_features, ("cv2",)),
+    "hough": (method_hough, ("scipy.signal", "mrslam_env.merge.refine")),
 }
 
 

@@ -37,6 +37,44 @@ GENERATOR_VERSION = 1
 DEFAULT_WORLDS = ("office", "warehouse", "maze", "twin_wings", "procedural-1", "procedural-2")
 DEFAULT_CACHE = Path("runs") / "bench-merge-pairs"
 
+REAL_WORLDS = (
+    "bookstore",
+    "small_house",
+    "tb3_sandbox",
+    "aws_warehouse_lowres",
+    "aws_warehouse",
+)
+"""The real buildings (:mod:`scenarios.worlds.real`) of the second default pair set.
+``planner_test`` is left out: the free space a robot can reach from its start is about
+20 m², which a run knows whole after 100 steps, so every pair of runs overlaps ~99 %,
+above the top overlap bin (the set would fill its slots from the other buildings)."""
+
+MAP_PREFIX = "map:"
+"""Scenario label of a world built from a map file: ``map:<file stem>``."""
+
+
+def world_family(scenario: str) -> str:
+    """``"real"`` for a real building or a world from a map file, else ``"built-in"``."""
+    from scenarios.worlds.real import REAL_BUILDINGS
+
+    return "real" if scenario in REAL_BUILDINGS or scenario.startswith(MAP_PREFIX) else "built-in"
+
+
+def map_label(path: str | Path) -> str:
+    """The scenario label of a world built from the ROS map file ``path``."""
+    return MAP_PREFIX + Path(path).stem
+
+
+def world_from_map_file(path: str | Path) -> WorldSpec:
+    """A simulator world from any ROS map file: loaded, cleaned
+    (:func:`~mrslam_env.sim.cleaning.clean_for_simulation`) and walled
+    (:func:`~mrslam_env.sim.mapworld.world_from_map`), named :func:`map_label`."""
+    from mrslam_env.sim.cleaning import clean_for_simulation
+    from mrslam_env.sim.mapworld import world_from_map
+
+    grid = clean_for_simulation(load_map(Path(path)))
+    return world_from_map(grid, name=map_label(path), rng=np.random.default_rng(0))
+
 
 # --------------------------------------------------------------------------------------
 # Configuration
@@ -51,7 +89,11 @@ class PairGenerationConfig:
     seed: int = 0
     """Seeds the starts, the env (sensor noise) and the wander policies."""
     worlds: tuple[str, ...] = DEFAULT_WORLDS
-    """Scenario names; pairs are spread over them in turn."""
+    """Scenario names (built-in or real buildings); pairs are spread over them in turn."""
+    maps: tuple[str, ...] = ()
+    """ROS map files (YAML paths) to build further worlds from (:func:`world_from_map_file`),
+    after ``worlds``; their scenario label is :func:`map_label`. Left out of the cache key
+    when empty, so sets without map files keep their key."""
     runs_per_world: int = 8
     """Independent single-robot runs per world; pairs combine two different runs."""
     checkpoints: tuple[int, ...] = (60, 150, 300, 600, 1000, 1500)
@@ -64,13 +106,20 @@ class PairGenerationConfig:
     """A pair with an overlap below this counts as "no overlap"."""
     min_known_area: float = 4.0
     """Maps knowing less than this area (m²) are not used, m²."""
+    native_resolution: bool = False
+    """Run the SLAM at the resolution of the map a world was built from (the real buildings
+    and map files; e.g. 0.02 m for ``aws_warehouse``) instead of the SLAM's default 0.05 m
+    (:class:`~mrslam_env.slam.config.GridConfig`). Left out of the cache key when False."""
 
     def __post_init__(self) -> None:
         name = type(self).__name__
         check_fields(self, counts=("n_pairs", "runs_per_world"), non_negative=("min_known_area",))
         runs = self.runs_per_world
         require(name, "runs_per_world", runs, runs >= 2, "an int >= 2 (pairs combine two runs)")
-        require(name, "worlds", self.worlds, len(self.worlds) > 0, "at least one scenario name")
+        sources = len(self.worlds) + len(self.maps)
+        require(name, "worlds", self.worlds, sources > 0, "at least one scenario name or map")
+        labels = self.labels()
+        require(name, "maps", self.maps, len(set(labels)) == len(labels), "distinct world names")
         steps = self.checkpoints
         ok = bool(steps) and all(s >= 1 for s in steps) and list(steps) == sorted(set(steps))
         require(name, "checkpoints", steps, ok, "increasing positive step counts")
@@ -87,11 +136,65 @@ class PairGenerationConfig:
         """Folder name of this configuration's cached pairs (the onboard SLAM's defaults are
         part of it: maps made by another SLAM are other pairs)."""
         slam = asdict(SlamConfig())
-        text = json.dumps(
-            {"version": GENERATOR_VERSION, "slam": slam, **asdict(self)}, sort_keys=True
-        )
+        fields = asdict(self)
+        if not self.maps:  # keeps the keys of the sets made before map files were possible
+            del fields["maps"]
+        if not self.native_resolution:
+            del fields["native_resolution"]
+        else:  # another file under the same name is another world
+            fields["map_digests"] = [_file_digest(Path(path)) for path in self.maps]
+        text = json.dumps({"version": GENERATOR_VERSION, "slam": slam, **fields}, sort_keys=True)
         digest = hashlib.sha1(text.encode()).hexdigest()[:10]
         return f"v{GENERATOR_VERSION}-n{self.n_pairs}-seed{self.seed}-{digest}"
+
+    def labels(self) -> list[str]:
+        """The scenario label of every world: the names, then the map files' labels."""
+        return [*self.worlds, *(map_label(path) for path in self.maps)]
+
+    def world(self, label: str) -> WorldSpec:
+        """The world of one of :meth:`labels`."""
+        for path in self.maps:
+            if map_label(path) == label:
+                return world_from_map_file(path)
+        return build_world(label)
+
+    def slam_config(self, label: str) -> SlamConfig:
+        """The onboard SLAM's settings for the world ``label``: the defaults, at the world's
+        map resolution with :attr:`native_resolution` when it was built from a map."""
+        base = SlamConfig()
+        if not self.native_resolution:
+            return base
+        from scenarios.worlds.real import REAL_BUILDINGS, map_file
+
+        path: Path | None = None
+        if label in REAL_BUILDINGS:
+            path = map_file(label)
+        for candidate in self.maps:
+            if map_label(candidate) == label:
+                path = Path(candidate)
+        if path is None:
+            return base
+        resolution = load_map(path).resolution
+        return replace(base, grid=replace(base.grid, resolution=resolution))
+
+    def build_worlds(self) -> list[WorldSpec]:
+        """The worlds in :meth:`labels` order."""
+        return [build_world(name) for name in self.worlds] + [
+            world_from_map_file(path) for path in self.maps
+        ]
+
+
+def _file_digest(path: Path) -> str:
+    """SHA-1 of a map's YAML and image (missing files: of the path alone)."""
+    from mrslam_env.mapio import map_images
+
+    digest = hashlib.sha1(str(path).encode())
+    try:
+        for part in (path, *map_images(path)):
+            digest.update(part.read_bytes())
+    except (OSError, ValueError):
+        pass
+    return digest.hexdigest()[:10]
 
 
 # --------------------------------------------------------------------------------------
@@ -253,7 +356,7 @@ class _Snapshot:
 
 
 def _world_snapshots(
-    world: WorldSpec, world_index: int, config: PairGenerationConfig
+    world: WorldSpec, world_index: int, config: PairGenerationConfig, label: str
 ) -> list[_Snapshot]:
     rng = np.random.default_rng([config.seed, world_index, 0])
     starts = reachable_starts(
@@ -261,9 +364,14 @@ def _world_snapshots(
     )
     raster: GridMap | None = None
     snapshots: list[_Snapshot] = []
+    slam_config = config.slam_config(label)
     for run, start in enumerate(starts):
         world_from_map, maps = simulate_run(
-            world, start, config.checkpoints, [config.seed, world_index, run + 1]
+            world,
+            start,
+            config.checkpoints,
+            [config.seed, world_index, run + 1],
+            slam_config=slam_config,
         )
         for steps, grid in maps.items():
             if raster is None:
@@ -305,7 +413,7 @@ def _bin_of(overlap: float, config: PairGenerationConfig) -> int | None:
 def _slot_plan(config: PairGenerationConfig) -> list[tuple[int, int]]:
     """(world index, bin) per pair: worlds in turn, no-overlap slots evenly spaced, each
     world cycling through the overlap bins."""
-    n, n_worlds = config.n_pairs, len(config.worlds)
+    n, n_worlds = config.n_pairs, len(config.labels())
     n_none = round(n * config.no_overlap_fraction)
     none_slots = {math.floor(k * n / n_none) for k in range(n_none)} if n_none else set()
     per_world_bin = list(range(n_worlds))  # each world starts at a different bin
@@ -336,10 +444,11 @@ def generate_pairs(
     started = time.perf_counter()
     snapshots: list[list[_Snapshot]] = []
     candidates: list[list[tuple[int, int, float]]] = []
-    for w, name in enumerate(config.worlds):
+    labels = config.labels()
+    for w, spec in enumerate(config.build_worlds()):
         if progress is not None:
-            progress(f"simulating {config.runs_per_world} runs in {name}")
-        snapshots.append(_world_snapshots(build_world(name), w, config))
+            progress(f"simulating {config.runs_per_world} runs in {labels[w]}")
+        snapshots.append(_world_snapshots(spec, w, config, labels[w]))
         candidates.append(_candidates(snapshots[-1]))
     rng = np.random.default_rng([config.seed, 7919])
     used: set[tuple[int, int, int]] = set()
@@ -368,7 +477,7 @@ def generate_pairs(
 
     def fallbacks(world: int, wanted: int) -> list[tuple[int, int]]:
         kinds = [wanted] if wanted < 0 else sorted(range(n_bins), key=lambda k: abs(k - wanted))
-        order = [world] + [w for w in range(len(config.worlds)) if w != world]
+        order = [world] + [w for w in range(len(labels)) if w != world]
         same_world = [(world, k) for k in kinds]
         other_worlds = [(w, wanted) for w in order[1:]]
         rest = [(w, k) for w in order[1:] for k in kinds if k != wanted]
@@ -399,8 +508,8 @@ def generate_pairs(
         first, second = snapshots[w][i], snapshots[w][j]
         if rng.random() < 0.5:
             first, second = second, first
-        scenario = config.worlds[w]
-        pair_id = f"{number:03d}-{scenario}"
+        scenario = labels[w]
+        pair_id = f"{number:03d}-{scenario.replace(MAP_PREFIX, 'map-')}"
         info = {
             "start1_world": first.start.tolist(),
             "start2_world": second.start.tolist(),

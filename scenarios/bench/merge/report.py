@@ -42,7 +42,9 @@ def summarize(
     overlapping pairs with ``pairs_overlapping``; ``wrong`` (count) and ``wrong_rate`` (over
     all pairs); ``correct_refusals`` and ``refusal_rate`` over the ``pairs_no_overlap``;
     ``median_/p90_translation_error`` (m) and ``median_/p90_rotation_error_deg`` over the
-    transforms returned on overlapping pairs; ``median_seconds`` per pair, and
+    transforms returned on overlapping pairs; ``proposal_recall_overlapping`` over the
+    ``pairs_recall`` overlapping pairs whose rows carry ``proposal_hit`` (NaN for a method
+    without candidates); ``median_seconds`` per pair, and
     ``median_seconds_small`` over the ``pairs_small`` whose grids are at most
     ``small_side`` cells on a side; ``wrong_as_good_as_truth``: wrong answers on
     overlapping pairs whose :func:`cell_agreement` is at least the truth's (the maps alone
@@ -67,6 +69,7 @@ def summarize(
         translation = [row["translation_error"] for row in returned]
         rotation = [row["rotation_error_deg"] for row in returned]
         small = [row for row in mine if row.get("largest_side_cells", 0) <= small_side]
+        recall = [bool(r["proposal_hit"]) for r in overlapping if r.get("proposal_hit") is not None]
         wrong = sum(row["outcome"] == "wrong" for row in mine)
         refusals = sum(row["outcome"] == "correct_refusal" for row in none)
         summary[name] = {
@@ -110,6 +113,8 @@ def summarize(
                 and r["agreement_estimate"] >= r["agreement_truth"]
                 for r in mine
             ),
+            "pairs_recall": len(recall),
+            "proposal_recall_overlapping": _rate(sum(recall), len(recall)),
         }
     return summary
 
@@ -197,6 +202,17 @@ def format_merge_table(
                 "wrong answers agreeing as well as the truth",
                 lambda s: str(s["wrong_as_good_as_truth"]),
             ),
+            *(
+                [
+                    (
+                        "proposal recall, overlapping pairs (truth within 0.5 m / 3° among "
+                        "the candidates)",
+                        lambda s: _percent(s.get("proposal_recall_overlapping", math.nan)),
+                    )
+                ]
+                if any(summary[n].get("pairs_recall") for n in names)
+                else []
+            ),
         ]
         header = "| | " + " | ".join(names) + " |"
         lines = [header, "|---|" + "---:|" * len(names)]
@@ -204,6 +220,36 @@ def format_merge_table(
             lines.append(f"| {label} | " + " | ".join(cell(summary[n]) for n in names) + " |")
     for name, reason in (skipped or {}).items():
         lines.append(f"\nskipped {name}: {reason}")
+    return "\n".join(lines)
+
+
+def format_family_breakdown(
+    rows: Sequence[dict[str, Any]], methods: Sequence[str], *, high_overlap: float = 0.3
+) -> str:
+    """Each method per world family (``built-in`` / ``real``, the rows' ``family``), as a
+    markdown table: success at overlap >= ``high_overlap`` and on all overlapping pairs,
+    wrong answers, correct refusals, proposal recall and the median time."""
+    families = sorted({row.get("family", "built-in") for row in rows})
+    lines = [
+        f"| method | worlds | pairs | success, overlap ≥ {100 * high_overlap:.0f}% | "
+        "success, overlapping | wrong | correct refusals | proposal recall | median s |",
+        "| --- | --- |" + " ---: |" * 7,
+    ]
+    for name in methods:
+        for family in families:
+            mine = [r for r in rows if r.get("family", "built-in") == family]
+            figures = summarize(mine, [name], high_overlap=high_overlap)[name]
+            if not figures["pairs"]:
+                continue
+            lines.append(
+                f"| {name} | {family} | {figures['pairs']} | "
+                f"{_percent(figures['success_rate_high'])} (n={figures['pairs_high']}) | "
+                f"{_percent(figures['success_rate_overlapping'])} "
+                f"(n={figures['pairs_overlapping']}) | {figures['wrong']} | "
+                f"{figures['correct_refusals']}/{figures['pairs_no_overlap']} | "
+                f"{_percent(figures['proposal_recall_overlapping'])} | "
+                f"{_number(figures['median_seconds'], 2)} |"
+            )
     return "\n".join(lines)
 
 
@@ -315,8 +361,8 @@ def write_rows(path: Path, rows: Sequence[dict[str, Any]], extra: dict[str, Any]
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix.lower() == ".csv":
         with path.open("w", newline="") as handle:
-            fields = list(rows[0]) if rows else ["pair_id"]
-            writer = csv.DictWriter(handle, fieldnames=fields)
+            fields = list(dict.fromkeys(key for row in rows for key in row)) or ["pair_id"]
+            writer = csv.DictWriter(handle, fieldnames=fields, restval="")
             writer.writeheader()
             writer.writerows(rows)
     else:
