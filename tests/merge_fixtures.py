@@ -9,11 +9,13 @@ problem whose answer is ``map1_from_map2 = inverse(world_from_map1) ∘ world_fr
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import ndimage
 
 from mrslam_env.geometry import compose, inverse
-from mrslam_env.gridmap import GridMap
+from mrslam_env.gridmap import FREE, OCCUPIED, GridMap, grid_footprint, resample_cells
 from mrslam_env.registry import build_world
 from mrslam_env.sim.lidar import cast_scan
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
@@ -97,3 +99,27 @@ def map_pair(
         resolution=resolution,
     )
     return m1, m2
+
+
+def room_map(rows: int = 60, cols: int = 80, resolution: float = 0.05) -> GridMap:
+    """A fully known walled rectangle with an inner wall stub, origin at (0, 0)."""
+    cells = np.full((rows, cols), FREE, dtype=np.int8)
+    cells[[0, -1], :] = OCCUPIED
+    cells[:, [0, -1]] = OCCUPIED
+    cells[: rows // 2, cols // 3] = OCCUPIED
+    return GridMap(cells=cells, resolution=resolution, origin=(0.0, 0.0))
+
+
+def in_frame(grid: GridMap, frame: np.ndarray, resolution: float | None = None) -> GridMap:
+    """``grid`` expressed in a frame whose pose in grid's frame is ``frame``."""
+    res = grid.resolution if resolution is None else resolution
+    corners = grid_footprint(grid, inverse(frame))
+    lo = np.floor(corners.min(axis=0) / res) * res
+    hi = corners.max(axis=0)
+    shape = (math.ceil((hi[1] - lo[1]) / res), math.ceil((hi[0] - lo[0]) / res))
+    origin = (float(lo[0]), float(lo[1]))
+    return GridMap(
+        cells=resample_cells(grid, inverse(frame), origin, shape, res),
+        resolution=res,
+        origin=origin,
+    )

@@ -8,11 +8,11 @@ import sys
 
 import numpy as np
 import pytest
-from merge_fixtures import poses_near, scan_map
+from merge_fixtures import in_frame, poses_near, room_map, scan_map
 
 from mrslam_env.evaluation import cell_agreement, relative_transform_error, true_overlap
 from mrslam_env.geometry import compose, inverse, transform_points
-from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap, resample_cells
+from mrslam_env.gridmap import UNKNOWN, GridMap
 from mrslam_env.registry import build_world
 from scenarios.bench.merge import methods as merge_methods
 from scenarios.bench.merge import pairs as merge_pairs
@@ -30,29 +30,6 @@ from scenarios.bench.merge.run import Tolerance, classify_outcome, run_merge_ben
 from scenarios.cli import main
 
 TRUTH = np.array([1.0, -2.0, 0.5])
-
-
-def room_map(rows: int = 60, cols: int = 80, resolution: float = 0.05) -> GridMap:
-    """A fully known walled rectangle with an inner wall stub, origin at (0, 0)."""
-    cells = np.full((rows, cols), FREE, dtype=np.int8)
-    cells[[0, -1], :] = OCCUPIED
-    cells[:, [0, -1]] = OCCUPIED
-    cells[: rows // 2, cols // 3] = OCCUPIED
-    return GridMap(cells=cells, resolution=resolution, origin=(0.0, 0.0))
-
-
-def warped_copy(grid: GridMap, map1_from_map2: np.ndarray) -> GridMap:
-    """``grid`` seen from a frame 2 with ``map1_from_map2`` to grid's frame (nearest cell)."""
-    xmin, ymin, xmax, ymax = grid.extent
-    corners = np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])
-    in_2 = transform_points(inverse(map1_from_map2), corners)
-    res = grid.resolution
-    lo = np.floor(in_2.min(axis=0) / res) * res
-    hi = in_2.max(axis=0)
-    shape = (math.ceil((hi[1] - lo[1]) / res), math.ceil((hi[0] - lo[0]) / res))
-    origin = (float(lo[0]), float(lo[1]))
-    cells = resample_cells(grid, inverse(map1_from_map2), origin, shape, res)
-    return GridMap(cells=cells, resolution=res, origin=origin)
 
 
 # --- scoring ---------------------------------------------------------------------------
@@ -261,7 +238,7 @@ def test_features_baseline_recovers_a_rotated_shifted_copy() -> None:
     rng = np.random.default_rng(0)
     m1 = scan_map(world, poses_near(world, (6.0, 4.0), 3.0, 10, rng), np.array([6.0, 4.0, 0.3]))
     truth = np.array([1.5, -0.8, math.pi / 2])
-    m2 = warped_copy(m1, truth)
+    m2 = in_frame(m1, truth)
     result = estimate_transform_features(m1, m2)
     assert result.transform is not None, f"confidence {result.confidence:.2f}"
     translation, rotation = relative_transform_error(result.transform, truth)
@@ -378,7 +355,7 @@ def test_random_walk_baseline_returns_only_accepted_transforms() -> None:
     world = build_world("office")
     rng = np.random.default_rng(0)
     m1 = scan_map(world, poses_near(world, (6.0, 4.0), 3.0, 10, rng), np.array([6.0, 4.0, 0.3]))
-    m2 = warped_copy(m1, np.array([1.5, -0.8, 2.0]))
+    m2 = in_frame(m1, np.array([1.5, -0.8, 2.0]))
     config = RandomWalkBaselineConfig(starts=3)
     for seed in range(2):
         estimate = merge_methods.method_random_walk(m1, m2, np.random.default_rng(seed), config)

@@ -8,38 +8,15 @@ import math
 
 import numpy as np
 import pytest
+from merge_fixtures import in_frame, room_map
 
 from mrslam_env.evaluation import CoverageEvaluator, relative_transform_error, true_overlap
 from mrslam_env.geometry import compose, inverse, transform_points
-from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap, grid_footprint, resample_cells
+from mrslam_env.gridmap import UNKNOWN, GridMap
 from mrslam_env.registry import build_world
 from mrslam_env.sim.world import WorldSpec, box, ground_truth_map
 
 TRUTH = np.array([1.0, -2.0, 0.5])
-
-
-def room_map(rows: int = 60, cols: int = 80, resolution: float = 0.05) -> GridMap:
-    """A fully known walled rectangle with an inner wall stub, origin at (0, 0)."""
-    cells = np.full((rows, cols), FREE, dtype=np.int8)
-    cells[[0, -1], :] = OCCUPIED
-    cells[:, [0, -1]] = OCCUPIED
-    cells[: rows // 2, cols // 3] = OCCUPIED
-    return GridMap(cells=cells, resolution=resolution, origin=(0.0, 0.0))
-
-
-def in_frame(grid: GridMap, frame: np.ndarray, resolution: float | None = None) -> GridMap:
-    """``grid`` expressed in a frame whose pose in grid's frame is ``frame``."""
-    res = grid.resolution if resolution is None else resolution
-    corners = grid_footprint(grid, inverse(frame))
-    lo = np.floor(corners.min(axis=0) / res) * res
-    hi = corners.max(axis=0)
-    shape = (math.ceil((hi[1] - lo[1]) / res), math.ceil((hi[0] - lo[0]) / res))
-    origin = (float(lo[0]), float(lo[1]))
-    return GridMap(
-        cells=resample_cells(grid, inverse(frame), origin, shape, res),
-        resolution=res,
-        origin=origin,
-    )
 
 
 # --- relative_transform_error --------------------------------------------------------------
