@@ -155,6 +155,7 @@ from mrslam_env.registry import available_scenarios, build_world
 from mrslam_env.sim.simulator import SimState, Simulator
 from mrslam_env.sim.starts import world_start_points
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
+from mrslam_env.slam.grid import mark_newly_known
 from mrslam_env.slam.local_map import local_map
 from mrslam_env.slam.raycast import mark_scan_observed
 from mrslam_env.slam.scan import mask_returns_near, sighted_positions
@@ -443,14 +444,17 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
             true_pose_in_map = None
             if ground_truth:
                 true_pose_in_map = compose(inverse(self._sim.starts[i]), state.true_poses[i])
+            integrated = slam.n_integrated
             slam.update(state.odometry[i], self._scan_without_peers(state, i), true_pose_in_map)
-            ever = self._ever_known_aligned(i, grid)
+            if slam.n_integrated == integrated:  # no scan integrated: the map is as it was
+                self._newly_known_world_cells.append(np.empty((0, 2), dtype=np.int64))
+                continue
+            ever = self._ever_known_aligned(i, slam.grid)
             config = grid.config
-            log_odds = grid.log_odds
-            known = (log_odds < config.free_threshold) | (log_odds > config.occupied_threshold)
-            new = known & ~ever
-            ever |= new
-            cells = np.argwhere(new)
+            cells = mark_newly_known(
+                slam.grid.log_odds, ever, config.free_threshold, config.occupied_threshold
+            )
+            grid = slam.grid
             area[i] = len(cells) * grid.resolution**2
             self._observed_area[i] = grid.known_cells * grid.resolution**2
             self._newly_known_world_cells.append(self._map_cells_to_coverage(i, grid, cells))

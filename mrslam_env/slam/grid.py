@@ -71,6 +71,7 @@ __all__ = [
     "facing_sectors",
     "gaussian_kernels",
     "integrate_scan",
+    "mark_newly_known",
     "scan_extent",
     "sector_of",
 ]
@@ -752,3 +753,55 @@ class OccupancyGrid:
         )
         self.known_cells += int(newly_known)
         return flips
+
+
+@numba.njit(cache=True)
+def _mark_newly_known(
+    log_odds: NDArray[np.float32],
+    ever: NDArray[np.bool_],
+    free_threshold: float,
+    occupied_threshold: float,
+    rows_out: NDArray[np.int64],
+    cols_out: NDArray[np.int64],
+) -> int:
+    count = 0
+    for row in range(log_odds.shape[0]):
+        for col in range(log_odds.shape[1]):
+            value = log_odds[row, col]
+            if (value < free_threshold or value > occupied_threshold) and not ever[row, col]:
+                ever[row, col] = True
+                rows_out[count] = row
+                cols_out[count] = col
+                count += 1
+    return count
+
+
+def mark_newly_known(
+    log_odds: NDArray[Any],
+    ever: NDArray[np.bool_],
+    free_threshold: float,
+    occupied_threshold: float,
+) -> NDArray[np.int64]:
+    """Cells known (log-odds beyond a threshold) that ``ever`` has not marked yet; marks them.
+
+    One pass, no temporaries the size of the grid (the env calls it every step).
+
+    Parameters
+    ----------
+    log_odds : ndarray (rows, cols)
+    ever : ndarray of bool (rows, cols)
+        Updated in place.
+    free_threshold, occupied_threshold : float
+        Known means ``< free_threshold`` or ``> occupied_threshold``.
+
+    Returns
+    -------
+    ndarray of int64, shape (k, 2)
+        ``[row, col]`` of the newly known cells, row-major order.
+    """
+    size = log_odds.size
+    rows, cols = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
+    count = _mark_newly_known(
+        log_odds, ever, float(free_threshold), float(occupied_threshold), rows, cols
+    )
+    return np.column_stack([rows[:count], cols[:count]])
