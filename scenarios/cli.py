@@ -232,12 +232,20 @@ def _build_parser() -> argparse.ArgumentParser:
 def _cmd_run(args: argparse.Namespace) -> int:
     import signal
 
-    from scenarios.experiment import RunConfig, RunInterrupted, run_experiment
+    from scenarios.experiment import RunInterrupted
 
     def terminated(signum: int, frame: object) -> None:
         raise RunInterrupted(signum)
 
-    signal.signal(signal.SIGTERM, terminated)  # ends the run as Ctrl-C does
+    previous = signal.signal(signal.SIGTERM, terminated)  # ends the run as Ctrl-C does
+    try:
+        return _run(args)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from scenarios.experiment import RunConfig, run_experiment
 
     config = RunConfig(
         scenario=args.scenario,
@@ -375,8 +383,9 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
     from mrslam_env.registry import available_scenarios, build_world
 
     if args.export:
-        from mrslam_env.mapio import check_grid_size, map_yaml_path, save_map
+        from mrslam_env.mapio import check_grid_size, map_images, map_yaml_path, save_map
         from mrslam_env.sim.world import ground_truth_map
+        from scenarios.worlds.real import REAL_BUILDINGS, map_file
 
         name, out = args.export
         if not args.resolution > 0:
@@ -388,7 +397,10 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
             f"{name} at {args.resolution} m/cell",
         )
         output_yaml = map_yaml_path(out)
-        check_outputs([output_yaml, output_yaml.with_suffix(".pgm")], [])
+        inputs: list[Path] = []
+        if name in REAL_BUILDINGS:  # the packaged map it is built from
+            inputs = [map_file(name), *map_images(map_file(name))]
+        check_outputs([output_yaml, output_yaml.with_suffix(".pgm")], inputs)
         path = save_map(output_yaml, ground_truth_map(world, args.resolution, margin=0.5))
         print(f"wrote {path}")
         return 0
@@ -689,10 +701,14 @@ def check_outputs(outputs: Sequence[Path], inputs: Sequence[Path]) -> None:
         Naming the output and the problem.
     """
     resolved_inputs = {Path(p).resolve() for p in inputs}
+    seen: set[Path] = set()
     for output in outputs:
         output = Path(output)
         if output.resolve() in resolved_inputs:
             raise ValueError(f"output {output} would overwrite an input file")
+        if output.resolve() in seen:
+            raise ValueError(f"two outputs are the same file: {output}")
+        seen.add(output.resolve())
         if output.is_dir():
             raise ValueError(f"output {output} is a folder; name a file")
         if not output.parent.is_dir():

@@ -29,7 +29,9 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import signal
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -71,6 +73,9 @@ OUTPUT_FILES = (
     "merged.pgm",
 )
 """A run's outputs besides the robots' maps (``robot_<i>.yaml`` / ``.pgm``)."""
+ROBOT_MAP = re.compile(r"robot_\d+\.(yaml|pgm)")
+PARTIAL_RECORDING = ".recording.part.rrd"
+"""The recording while it is written; renamed to ``recording.rrd`` when closed."""
 
 
 class RunInterrupted(KeyboardInterrupt):
@@ -92,7 +97,8 @@ def prepare_run_dir(out: Path, name: str, *, overwrite: bool = False) -> Path:
         raise ValueError(f"run folder {folder} exists and is a file")
     if folder.is_dir() and any(folder.iterdir()):
         if overwrite:
-            for old in [*OUTPUT_FILES, *(p.name for p in folder.glob("robot_*.[yp][ag]m*"))]:
+            robot_maps = [p.name for p in folder.iterdir() if ROBOT_MAP.fullmatch(p.name)]
+            for old in [*OUTPUT_FILES, PARTIAL_RECORDING, *robot_maps]:
                 (folder / old).unlink(missing_ok=True)
         else:
             index = 2
@@ -224,10 +230,35 @@ def _pose_dict(pose: FloatArray) -> dict[str, float]:
     }
 
 
+@contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """SIGINT and SIGTERM ignored inside the block (main thread only): a second Ctrl-C, or
+    a scheduler's SIGTERM, while a run writes its outputs cannot leave them half written.
+    Elsewhere (a worker thread) the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    for s in previous:
+        signal.signal(s, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
 def run_experiment(config: RunConfig) -> dict[str, Any]:
     """Run one experiment, write its outputs, return the report (also ``report.json``)."""
     world = resolve_world(config.scenario, config.map_path, config.seed)
     name = config.name or f"{world.name.replace(':', '_')}-seed{config.seed}"
+    if config.overwrite and config.map_path is not None:
+        folder = (Path(config.out) / name).resolve()
+        if Path(config.map_path).resolve().parent == folder:
+            raise ValueError(
+                f"--overwrite would delete the input map {config.map_path} (it is in the run "
+                f"folder {Path(config.out) / name}); copy it elsewhere or choose another --name"
+            )
     run_dir = prepare_run_dir(Path(config.out), name, overwrite=config.overwrite)
     comm = CommConfig() if config.comm else CommConfig(comm_range=1e-9)
     env_config = EnvConfig(max_cycles=config.max_steps, comm=comm)
@@ -245,196 +276,209 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
     # The robots whose maps count towards coverage (single: robot 0 alone).
     counted = [0] if config.single else list(range(len(agents)))
     idle = np.zeros(2, dtype=np.float32)
-    recording_part = run_dir / ".recording.part.rrd"  # renamed once closed
+    recording_part = run_dir / PARTIAL_RECORDING
     recorder = (
         Recorder(recording_part, n_robots=len(agents), map_every=config.map_every)
         if config.record
         else None
     )
-    if recorder is not None:
-        recorder.log_ground_truth(world, ground_truth_map(world, 0.05))
-        recorder.log_event(
-            f"run {name}: world {world.name}, {len(agents)} robots, seed {config.seed}"
-        )
-        recorder.log_text("team/state", str(team.state))
-    # Each robot's SLAM poses (map frame) and true poses (world), every step, for its ATE.
-    slam_poses: list[list[FloatArray]] = [[observations[a]["pose"]] for a in agents]
-    true_poses: list[list[FloatArray]] = [[infos[a]["true_pose"]] for a in agents]
-
-    def ate(i: int) -> float:
-        return absolute_trajectory_error(slam_poses[i], true_poses[i], world_from_maps[i])
-
-    logged_scans = [-1] * len(agents)
-    drawn = _DrawnRendezvous()
-    shown_transform: FloatArray | None = None
-    collisions = dict.fromkeys(agents, 0)
-    state = team.state
-    coverage_curve: list[tuple[int, float]] = []
-    t90: float | None = None
-    steps = 0
-    interrupted: str | None = None
-    started = time.perf_counter()
     try:
-        with _progress(config.max_steps, config.progress) as bar:
-            while env.agents:
-                if config.single:
-                    actions = [team.explorers[0].act(observations[agents[0]], maps(0)), idle]
-                else:
-                    actions = team.act([observations[a] for a in agents], maps)
-                observations, _rewards, _terms, _truncs, infos = env.step(
-                    {agent: actions[i] for i, agent in enumerate(agents)}
-                )
-                steps += 1
-                bar.update(1)
-                for i, agent in enumerate(agents):
-                    collisions[agent] += infos[agent]["collision"]
-                    slam_poses[i].append(observations[agent]["pose"])
-                    true_poses[i].append(infos[agent]["true_pose"])
-                if recorder is not None:
-                    recorder.set_time(steps, steps * env_config.dt)
-                    for decision in team.pop_decisions():
-                        recorder.log_event(decision.text)
-                        if "rendezvous" in decision.text or "hypothesis #" in decision.text:
-                            recorder.log_text("rendezvous/status", decision.text)
-                    for attempt in team.pop_merge_attempts():
-                        recorder.log_merge_attempt(
-                            attempt.number,
-                            attempt.result,
-                            attempt.map0,
-                            attempt.map1,
-                            label=f"robot_0's and robot_1's maps at step {attempt.step}",
-                        )
-                    if team.transform is not None and team.transform is not shown_transform:
-                        recorder.set_team_transform(1, team.transform)
-                        shown_transform = team.transform
-                    if team.state is not state:
-                        recorder.log_text("team/state", str(team.state))
-                    _record_step(
-                        recorder,
-                        env,
-                        team,
-                        maps,
-                        observations,
-                        infos,
-                        config,
-                        logged_scans,
-                        drawn,
-                    )
-                    if recorder.map_due:
-                        for i, agent in enumerate(agents):
-                            recorder.log_scalar(f"ate/{agent}", ate(i))
-                else:
-                    team.pop_decisions()
-                state = team.state
-                if steps % config.coverage_every == 0 or not env.agents:
-                    covered = evaluator.coverage(
-                        [maps(i) for i in counted], [world_from_maps[i] for i in counted]
-                    )
-                    coverage_curve.append((steps, covered))
-                    if recorder is not None:
-                        recorder.log_scalar("coverage/team", covered)
-                    if t90 is None and covered >= 0.9:
-                        t90 = steps * env_config.dt
-                    if covered >= config.target_coverage:
-                        break
-                    if all(team.explorers[i].done for i in counted):
-                        break
-    except KeyboardInterrupt as stop:  # Ctrl-C or a signal: keep what was done
-        interrupted = getattr(stop, "signal_name", "SIGINT")
-    wall_time = time.perf_counter() - started
+        if recorder is not None:
+            recorder.log_ground_truth(world, ground_truth_map(world, 0.05))
+            recorder.log_event(
+                f"run {name}: world {world.name}, {len(agents)} robots, seed {config.seed}"
+            )
+            recorder.log_text("team/state", str(team.state))
+        # Each robot's SLAM poses (map frame) and true poses (world), every step, for its ATE.
+        slam_poses: list[list[FloatArray]] = [[observations[a]["pose"]] for a in agents]
+        true_poses: list[list[FloatArray]] = [[infos[a]["true_pose"]] for a in agents]
 
-    own_maps = [maps(i) for i in range(len(agents))]
-    for agent, grid in zip(agents, own_maps, strict=True):
-        save_map(run_dir / f"{agent}.yaml", grid)
-    outputs: dict[str, Any] = {
-        "run_dir": str(run_dir),
-        "maps": {agent: str(run_dir / f"{agent}.yaml") for agent in agents},
-    }
-    truth = ground_truth_map(world, own_maps[0].resolution)
-    merged = preliminary = None
-    merge_report: dict[str, Any] = {
-        "verified": team.transform is not None,
-        "transform": None,
-        "true_transform": _pose_dict(true_transform),
-        "translation_error": None,
-        "rotation_error": None,
-        "hypotheses_tested": team.hypotheses_tested,
-        "step_verified": team.step_verified,
-    }
-    if team.transform is not None:
-        other = own_maps[1]
-        if not math.isclose(other.resolution, own_maps[0].resolution):
-            other = resample_map(other, own_maps[0].resolution)
-        merged = fuse_maps(own_maps[0], other, team.transform)
-        assert team.preliminary_transform is not None
-        preliminary = fuse_maps(own_maps[0], other, team.preliminary_transform)
-        translation_error, rotation_error = relative_transform_error(team.transform, true_transform)
-        merge_report.update(
-            transform=_pose_dict(team.transform),
-            preliminary_transform=_pose_dict(team.preliminary_transform),
-            translation_error=round(translation_error, 4),
-            rotation_error=round(math.degrees(rotation_error), 4),
-        )
-        save_map(run_dir / "merged.yaml", merged)
-        outputs["merged_map"] = str(run_dir / "merged.yaml")
-    coverage = {
-        "merged": round(
-            evaluator.coverage([merged], [world_from_maps[0]])
-            if merged is not None
-            else evaluator.coverage(
-                [own_maps[i] for i in counted], [world_from_maps[i] for i in counted]
-            ),
-            4,
-        ),
-        **{
-            agent: round(evaluator.coverage([own_maps[i]], [world_from_maps[i]]), 4)
-            for i, agent in enumerate(agents)
-        },
-    }
-    if config.figure:
-        with atomic_path(run_dir / "figure.png") as figure:
-            summary_figure(figure, truth, own_maps[0], own_maps[1], preliminary, merged)
-        outputs["figure"] = str(run_dir / "figure.png")
-    report: dict[str, Any] = {
-        "complete": interrupted is None,
-        "interrupted": interrupted,
-        "scenario": world.name,
-        "seed": config.seed,
-        "steps": steps,
-        "sim_time": round(steps * env_config.dt, 6),
-        "wall_time": round(wall_time, 3),
-        "interaction": config.interaction,
-        "comm": config.comm,
-        "oracle": config.oracle,
-        "single": config.single,
-        "merge": merge_report,
-        "coverage": coverage,
-        "t90": None if t90 is None else round(t90, 3),
-        "coverage_curve": [[s, round(c, 4)] for s, c in coverage_curve],
-        "slam": {
-            agent: {
-                "ate": round(ate(i), 4),
-                "map_agreement": round(map_agreement(own_maps[i], world_from_maps[i], truth), 4),
+        def ate(i: int) -> float:
+            return absolute_trajectory_error(slam_poses[i], true_poses[i], world_from_maps[i])
+
+        logged_scans = [-1] * len(agents)
+        drawn = _DrawnRendezvous()
+        shown_transform: FloatArray | None = None
+        collisions = dict.fromkeys(agents, 0)
+        state = team.state
+        coverage_curve: list[tuple[int, float]] = []
+        t90: float | None = None
+        steps = 0
+        interrupted: str | None = None
+        started = time.perf_counter()
+        try:
+            with _progress(config.max_steps, config.progress) as bar:
+                while env.agents:
+                    if config.single:
+                        actions = [team.explorers[0].act(observations[agents[0]], maps(0)), idle]
+                    else:
+                        actions = team.act([observations[a] for a in agents], maps)
+                    observations, _rewards, _terms, _truncs, infos = env.step(
+                        {agent: actions[i] for i, agent in enumerate(agents)}
+                    )
+                    steps += 1
+                    bar.update(1)
+                    for i, agent in enumerate(agents):
+                        collisions[agent] += infos[agent]["collision"]
+                        slam_poses[i].append(observations[agent]["pose"])
+                        true_poses[i].append(infos[agent]["true_pose"])
+                    if recorder is not None:
+                        recorder.set_time(steps, steps * env_config.dt)
+                        for decision in team.pop_decisions():
+                            recorder.log_event(decision.text)
+                            if "rendezvous" in decision.text or "hypothesis #" in decision.text:
+                                recorder.log_text("rendezvous/status", decision.text)
+                        for attempt in team.pop_merge_attempts():
+                            recorder.log_merge_attempt(
+                                attempt.number,
+                                attempt.result,
+                                attempt.map0,
+                                attempt.map1,
+                                label=f"robot_0's and robot_1's maps at step {attempt.step}",
+                            )
+                        if team.transform is not None and team.transform is not shown_transform:
+                            recorder.set_team_transform(1, team.transform)
+                            shown_transform = team.transform
+                        if team.state is not state:
+                            recorder.log_text("team/state", str(team.state))
+                        _record_step(
+                            recorder,
+                            env,
+                            team,
+                            maps,
+                            observations,
+                            infos,
+                            config,
+                            logged_scans,
+                            drawn,
+                        )
+                        if recorder.map_due:
+                            for i, agent in enumerate(agents):
+                                recorder.log_scalar(f"ate/{agent}", ate(i))
+                    else:
+                        team.pop_decisions()
+                    state = team.state
+                    if steps % config.coverage_every == 0 or not env.agents:
+                        covered = evaluator.coverage(
+                            [maps(i) for i in counted], [world_from_maps[i] for i in counted]
+                        )
+                        coverage_curve.append((steps, covered))
+                        if recorder is not None:
+                            recorder.log_scalar("coverage/team", covered)
+                        if t90 is None and covered >= 0.9:
+                            t90 = steps * env_config.dt
+                        if covered >= config.target_coverage:
+                            break
+                        if all(team.explorers[i].done for i in counted):
+                            break
+        except KeyboardInterrupt as stop:  # Ctrl-C or a signal: keep what was done
+            interrupted = getattr(stop, "signal_name", "SIGINT")
+        with _signals_deferred():  # the outputs of the steps done are written whole
+            wall_time = time.perf_counter() - started
+
+            own_maps = [maps(i) for i in range(len(agents))]
+            for agent, grid in zip(agents, own_maps, strict=True):
+                save_map(run_dir / f"{agent}.yaml", grid)
+            outputs: dict[str, Any] = {
+                "run_dir": str(run_dir),
+                "maps": {agent: str(run_dir / f"{agent}.yaml") for agent in agents},
             }
-            for i, agent in enumerate(agents)
-        },
-        "merged_map_accuracy": None
-        if merged is None
-        else round(map_agreement(merged, world_from_maps[0], truth), 4),
-        "collision_steps": {agent: int(collisions[agent]) for agent in agents},
-        "team_state": str(team.state),
-        "outputs": outputs,
-    }
-    if recorder is not None:
-        if merged is not None:
-            recorder.log_grid("team/merged_map", merged)
-        ending = "finished" if interrupted is None else f"interrupted ({interrupted})"
-        recorder.log_event(f"run {ending} after {steps} steps, coverage {coverage['merged']:.1%}")
-        recorder.close()
-        recording_part.replace(run_dir / "recording.rrd")
-        outputs["recording"] = str(run_dir / "recording.rrd")
-    write_text_atomic(run_dir / "report.json", json.dumps(report, indent=2) + "\n")
-    return report
+            truth = ground_truth_map(world, own_maps[0].resolution)
+            merged = preliminary = None
+            merge_report: dict[str, Any] = {
+                "verified": team.transform is not None,
+                "transform": None,
+                "true_transform": _pose_dict(true_transform),
+                "translation_error": None,
+                "rotation_error": None,
+                "hypotheses_tested": team.hypotheses_tested,
+                "step_verified": team.step_verified,
+            }
+            if team.transform is not None:
+                other = own_maps[1]
+                if not math.isclose(other.resolution, own_maps[0].resolution):
+                    other = resample_map(other, own_maps[0].resolution)
+                merged = fuse_maps(own_maps[0], other, team.transform)
+                assert team.preliminary_transform is not None
+                preliminary = fuse_maps(own_maps[0], other, team.preliminary_transform)
+                translation_error, rotation_error = relative_transform_error(
+                    team.transform, true_transform
+                )
+                merge_report.update(
+                    transform=_pose_dict(team.transform),
+                    preliminary_transform=_pose_dict(team.preliminary_transform),
+                    translation_error=round(translation_error, 4),
+                    rotation_error=round(math.degrees(rotation_error), 4),
+                )
+                save_map(run_dir / "merged.yaml", merged)
+                outputs["merged_map"] = str(run_dir / "merged.yaml")
+            coverage = {
+                "merged": round(
+                    evaluator.coverage([merged], [world_from_maps[0]])
+                    if merged is not None
+                    else evaluator.coverage(
+                        [own_maps[i] for i in counted], [world_from_maps[i] for i in counted]
+                    ),
+                    4,
+                ),
+                **{
+                    agent: round(evaluator.coverage([own_maps[i]], [world_from_maps[i]]), 4)
+                    for i, agent in enumerate(agents)
+                },
+            }
+            if config.figure:
+                with atomic_path(run_dir / "figure.png") as figure:
+                    summary_figure(figure, truth, own_maps[0], own_maps[1], preliminary, merged)
+                outputs["figure"] = str(run_dir / "figure.png")
+            report: dict[str, Any] = {
+                "complete": interrupted is None,
+                "interrupted": interrupted,
+                "scenario": world.name,
+                "seed": config.seed,
+                "steps": steps,
+                "sim_time": round(steps * env_config.dt, 6),
+                "wall_time": round(wall_time, 3),
+                "interaction": config.interaction,
+                "comm": config.comm,
+                "oracle": config.oracle,
+                "single": config.single,
+                "merge": merge_report,
+                "coverage": coverage,
+                "t90": None if t90 is None else round(t90, 3),
+                "coverage_curve": [[s, round(c, 4)] for s, c in coverage_curve],
+                "slam": {
+                    agent: {
+                        "ate": round(ate(i), 4),
+                        "map_agreement": round(
+                            map_agreement(own_maps[i], world_from_maps[i], truth), 4
+                        ),
+                    }
+                    for i, agent in enumerate(agents)
+                },
+                "merged_map_accuracy": None
+                if merged is None
+                else round(map_agreement(merged, world_from_maps[0], truth), 4),
+                "collision_steps": {agent: int(collisions[agent]) for agent in agents},
+                "team_state": str(team.state),
+                "outputs": outputs,
+            }
+            if recorder is not None:
+                if merged is not None:
+                    recorder.log_grid("team/merged_map", merged)
+                ending = "finished" if interrupted is None else f"interrupted ({interrupted})"
+                recorder.log_event(
+                    f"run {ending} after {steps} steps, coverage {coverage['merged']:.1%}"
+                )
+                recorder.close()
+                recording_part.replace(run_dir / "recording.rrd")
+                outputs["recording"] = str(run_dir / "recording.rrd")
+            write_text_atomic(run_dir / "report.json", json.dumps(report, indent=2) + "\n")
+        return report
+    except BaseException:  # a crash: close the recording, leave no partial file
+        if recorder is not None:
+            recorder.close()
+            recording_part.unlink(missing_ok=True)
+        raise
 
 
 @dataclass(slots=True)

@@ -75,6 +75,18 @@ def test_default_cache_key_is_unchanged() -> None:
     assert PairGenerationConfig().cache_key() == "v1-n40-seed0-0211c70fe7"
 
 
+def test_the_cache_key_follows_the_map_files_contents(tmp_path) -> None:
+    source = map_file("tb3_sandbox")
+    copy = tmp_path / "sandbox_copy.yaml"
+    copy.write_text(source.read_text())
+    for image in map_images(source):
+        shutil.copy(image, tmp_path / image.name)
+    config = PairGenerationConfig(maps=(str(copy),))
+    before = config.cache_key()
+    copy.write_text(source.read_text().replace("resolution: 0.05", "resolution: 0.06"))
+    assert config.cache_key() != before  # an edited map is another world: no stale pairs
+
+
 def test_pairs_from_a_real_building_and_a_map_file(tmp_path) -> None:
     source = map_file("tb3_sandbox")
     copy = tmp_path / "sandbox_copy.yaml"

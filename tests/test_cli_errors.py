@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -182,3 +183,34 @@ def test_bench_soak_reports_speed_and_memory_per_stretch(capsys) -> None:
     rows = json.loads(out)
     assert status == 0 and [r["step"] for r in rows] == [20, 30]
     assert all(r["steps_per_s"] > 0 and r["rss_mb"] > 10 and r["known_m2"] > 0 for r in rows)
+
+
+def test_two_outputs_that_are_one_file_are_refused(capsys, maps: Path) -> None:
+    status, _, err = run_cli(
+        capsys, "merge", maps / "a.yaml", maps / "b.yaml", "-o", maps / "m", "--rrd", maps / "m.pgm"
+    )
+    assert_one_line(err, status)
+    assert "two outputs are the same file" in err and not (maps / "m.yaml").exists()
+
+
+def test_export_never_overwrites_a_packaged_map(capsys) -> None:
+    from scenarios.worlds.real import map_file
+
+    before = map_file("tb3_sandbox").read_bytes()
+    status, _, err = run_cli(
+        capsys, "scenarios", "--export", "tb3_sandbox", map_file("tb3_sandbox")
+    )
+    assert_one_line(err, status)
+    assert "would overwrite an input file" in err
+    assert map_file("tb3_sandbox").read_bytes() == before
+
+
+def test_atomic_outputs_get_the_mode_a_plain_write_would(tmp_path: Path) -> None:
+    from mrslam_env.atomic import write_text_atomic
+
+    old = os.umask(0o022)
+    try:
+        write_text_atomic(tmp_path / "a.txt", "x")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o644

@@ -109,3 +109,46 @@ def test_a_signal_ends_the_run_in_one_line_with_its_exit_status(
     assert f"interrupted by {name} after 10 steps" in err and err.count("\n") == 1, err
     report = json.loads((tmp_path / "office-seed0" / "report.json").read_text())
     assert report["complete"] is False and report["interrupted"] == name
+
+
+def test_overwrite_keeps_files_that_only_look_like_robot_maps(tmp_path: Path) -> None:
+    folder = tmp_path / "a"
+    folder.mkdir()
+    for name in ["robot_0.yaml", "robot_12.pgm", "robot_0.yaml.bak", "robot_notes.pam"]:
+        (folder / name).write_text("old")
+    prepare_run_dir(tmp_path, "a", overwrite=True)
+    assert sorted(p.name for p in folder.iterdir()) == ["robot_0.yaml.bak", "robot_notes.pam"]
+
+
+def test_a_crash_closes_the_recording_and_leaves_no_partial_file(monkeypatch, tmp_path) -> None:
+    def crash() -> None:
+        raise RuntimeError("boom")
+
+    interrupt_at(monkeypatch, 6, crash)
+    with pytest.raises(RuntimeError, match="boom"):
+        run_experiment(RunConfig(out=tmp_path, name="r", max_steps=50, progress=False))
+    assert not (tmp_path / "r" / ".recording.part.rrd").exists()
+
+
+def test_signals_are_deferred_while_the_outputs_are_written() -> None:
+    from scenarios.experiment import _signals_deferred
+
+    before = signal.getsignal(signal.SIGTERM)
+    with _signals_deferred():
+        assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
+        os.kill(os.getpid(), signal.SIGTERM)  # ignored: the block runs to its end
+    assert signal.getsignal(signal.SIGTERM) is before
+
+
+def test_overwrite_refuses_to_delete_the_input_map(capsys, tmp_path: Path) -> None:
+    from mrslam_env.mapio import save_map
+    from mrslam_env.registry import build_world
+    from mrslam_env.sim.world import ground_truth_map
+
+    folder = tmp_path / "x"
+    folder.mkdir()
+    save_map(folder / "robot_0.yaml", ground_truth_map(build_world("maze"), 0.1, margin=0.5))
+    argv = ["run", "--map", str(folder / "robot_0.yaml"), "--out", str(tmp_path), "--name", "x"]
+    assert main([*argv, "--overwrite", "--max-steps", "5", "--no-record"]) == 2
+    assert "would delete the input map" in capsys.readouterr().err
+    assert (folder / "robot_0.yaml").exists()

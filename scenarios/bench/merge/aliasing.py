@@ -53,6 +53,7 @@ from numpy.typing import NDArray
 from scipy import fft as scipy_fft
 from scipy import ndimage
 
+from mrslam_env.atomic import write_text_atomic
 from mrslam_env.geometry import transform_points
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap, grid_footprint, resample_cells
 from mrslam_env.merge.fuse import resample_map
@@ -430,6 +431,8 @@ def cached_per_pair(
             cached[pair.pair_id] = compute(pair)
             if path is not None:
                 path.parent.mkdir(parents=True, exist_ok=True)
-                path.write_text(json.dumps({k: v.to_json() for k, v in cached.items()}, indent=1))
+                write_text_atomic(
+                    path, json.dumps({k: v.to_json() for k, v in cached.items()}, indent=1)
+                )
         result[pair.pair_id] = cached[pair.pair_id]
     return result

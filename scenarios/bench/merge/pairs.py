@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.wander import WanderPolicy
+from mrslam_env.atomic import write_text_atomic
 from mrslam_env.config import EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
 from mrslam_env.evaluation import overlap_of_masks, true_overlap
@@ -141,7 +142,7 @@ class PairGenerationConfig:
             del fields["maps"]
         if not self.native_resolution:
             del fields["native_resolution"]
-        else:  # another file under the same name is another world
+        if self.maps:  # another file under the same name is another world
             fields["map_digests"] = [_file_digest(Path(path)) for path in self.maps]
         text = json.dumps({"version": GENERATOR_VERSION, "slam": slam, **fields}, sort_keys=True)
         digest = hashlib.sha1(text.encode()).hexdigest()[:10]
@@ -551,7 +552,7 @@ def generate_pairs(
         "shortfall": shortfall,
         "pairs": entries,
     }
-    (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2))
+    write_text_atomic(out_dir / "manifest.json", json.dumps(manifest, indent=2))
     return pairs
 
 

@@ -13,6 +13,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from mrslam_env.atomic import write_text_atomic
+
 FloatArray = NDArray[np.float64]
 
 
@@ -366,5 +368,5 @@ def write_rows(path: Path, rows: Sequence[dict[str, Any]], extra: dict[str, Any]
             writer.writeheader()
             writer.writerows(rows)
     else:
-        path.write_text(json.dumps({**extra, "rows": list(rows)}, indent=2, default=float))
+        write_text_atomic(path, json.dumps({**extra, "rows": list(rows)}, indent=2, default=float))
     return path
