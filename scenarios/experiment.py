@@ -102,9 +102,13 @@ def prepare_run_dir(out: Path, name: str, *, overwrite: bool = False) -> Path:
                 (folder / old).unlink(missing_ok=True)
         else:
             index = 2
-            while (Path(out) / f"{name}-{index}").exists():
-                index += 1
-            folder = Path(out) / f"{name}-{index}"
+            while True:  # mkdir claims the folder: two runs started together never share one
+                folder = Path(out) / f"{name}-{index}"
+                try:
+                    folder.mkdir(parents=True)
+                    return folder
+                except FileExistsError:
+                    index += 1
     folder.mkdir(parents=True, exist_ok=True)
     return folder
 
