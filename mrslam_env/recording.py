@@ -706,23 +706,15 @@ class Recorder:
         """
         self._check_open()
         self._check_robot(robot)
-        hits = scan_hits_world(pose_xytheta, ranges, angles, max_range)
-        self._log(
-            f"world/{robot_entity(robot)}/scan",
-            rr.Points2D(
-                hits,
-                radii=_SCAN_RADIUS,
-                colors=robot_colour(robot),
-                draw_order=_DRAW_ORDER_SCAN,
-            ),
-        )
+        placements = [(f"world/{robot_entity(robot)}/scan", pose_xytheta)]
         slam = self._slam_poses.get(robot)
-        if slam is not None and slam[0] == self._step:
-            in_map = scan_hits_world(slam[1], ranges, angles, max_range)
+        if slam is not None and slam[0] == self._step:  # also at the SLAM pose, in its map
+            placements.append((f"{robot_entity(robot)}/scan", slam[1]))
+        for entity, pose in placements:
             self._log(
-                f"{robot_entity(robot)}/scan",
+                entity,
                 rr.Points2D(
-                    in_map,
+                    scan_hits_world(pose, ranges, angles, max_range),
                     radii=_SCAN_RADIUS,
                     colors=robot_colour(robot),
                     draw_order=_DRAW_ORDER_SCAN,
