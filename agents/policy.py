@@ -114,7 +114,7 @@ def load_policy_factory(spec: str) -> PolicyFactory:
     factory = getattr(module, attribute, None)
     if factory is None or not callable(factory):
         raise ValueError(f"policy {spec!r}: {module_name!r} has no callable {attribute!r}")
-    return factory  # type: ignore[no-any-return]
+    return factory
 
 
 def _module_from_path(path: str) -> Any:
