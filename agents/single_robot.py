@@ -165,7 +165,7 @@ class SingleRobotEnv(gymnasium.Env[Float32Array, Float32Array]):
             (infos[self.agent]),
         )
 
-    def render(self) -> NDArray[np.uint8] | None:
+    def render(self) -> Any:  # the frame (H, W, 3) uint8, or None (Gymnasium's RenderFrame)
         return self.multi.render()
 
     def close(self) -> None:
