@@ -19,9 +19,17 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 MAX_LINES = 45
 
 
-def run_example(name: str, *args: str, cwd: Path, timeout: float = 120.0) -> str:
-    """Run ``examples/<name>`` with ``args`` in ``cwd``; its stdout (exit code 0 asserted)."""
+def run_example(
+    name: str,
+    *args: str,
+    cwd: Path,
+    timeout: float = 120.0,
+    environment: dict[str, str] | None = None,
+) -> str:
+    """Run ``examples/<name>`` with ``args`` in ``cwd`` (``environment`` added to this
+    process's variables); its stdout (exit code 0 asserted)."""
     env = dict(os.environ, TMPDIR=str(cwd))  # the examples' temporary folders go in cwd
+    env.update(environment or {})
     env["PYTHONPATH"] = os.pathsep.join(
         [str(EXAMPLES.parent), *filter(None, [os.environ.get("PYTHONPATH")])]
     )
