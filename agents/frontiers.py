@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
-from mrslam_env.gridmap import GridMap
+from mrslam_env.gridmap import UNKNOWN, GridMap
 from mrslam_env.validation import check_fields, require
 
 __all__ = [
@@ -410,12 +410,15 @@ def _goal_cells(
     reachable: BoolArray,
     resolution: float,
     max_goal_offset: float,
+    offset: tuple[int, int] = (0, 0),
 ) -> tuple[IntArray, BoolArray]:
     """Per frontier: the reachable cell nearest to its cell closest to its centroid.
 
     If that cell is too far from anything reachable, the frontier cell nearest to the
     reachable space is used instead; the frontier is invalid when even that is farther
-    than ``max_goal_offset``.
+    than ``max_goal_offset``. ``labels`` and ``reachable`` may be a window of the map
+    whose cell [0, 0] is the map's cell ``offset``; ``centroid_cells`` and the goal cells
+    returned are in the map's cells.
     """
     goal_cells = np.zeros((count, 2), dtype=np.int64)
     valid = np.zeros(count, dtype=bool)
@@ -425,7 +428,7 @@ def _goal_cells(
     distance = distance * resolution
     cells = np.argwhere(labels > 0)
     owner = labels[cells[:, 0], cells[:, 1]] - 1
-    to_centroid = ((cells - centroid_cells[owner]) ** 2).sum(axis=1)
+    to_centroid = ((cells + np.asarray(offset) - centroid_cells[owner]) ** 2).sum(axis=1)
     to_reachable = distance[cells[:, 0], cells[:, 1]]
     # The middle cell when it is close enough to reachable space, else the closest cell.
     middle_ok = to_reachable <= max_goal_offset
@@ -442,9 +445,30 @@ def _goal_cells(
             if to_reachable[best] > max_goal_offset:
                 continue
         row, col = cells[best]
-        goal_cells[frontier] = (nearest[0][row, col], nearest[1][row, col])
+        goal_cells[frontier] = (nearest[0][row, col] + offset[0], nearest[1][row, col] + offset[1])
         valid[frontier] = True
     return goal_cells, valid
+
+
+def _work_window(grid: GridMap, reachable: BoolArray, margin: int) -> tuple[slice, slice]:
+    """The rows and columns of the bounding box of the known and reachable cells, grown by
+    ``margin`` cells and clipped to the grid (the whole grid when nothing is known).
+
+    Everything outside is UNKNOWN and unreachable, which the frontier steps treat exactly
+    as the space beyond the grid's edge, so they give the same frontiers on this window
+    (with ``margin >= 2``: the one-cell UNKNOWN ring that keeps the outside connected, and
+    the erosion's neighbourhood) for a fraction of the work on a grown SLAM grid.
+    """
+    rows, cols = grid.shape
+    known = (grid.cells != UNKNOWN) | reachable
+    known_rows = np.flatnonzero(known.any(axis=1))
+    if len(known_rows) == 0:
+        return slice(0, rows), slice(0, cols)
+    known_cols = np.flatnonzero(known[known_rows[0] : known_rows[-1] + 1].any(axis=0))
+    return (
+        slice(max(int(known_rows[0]) - margin, 0), min(int(known_rows[-1]) + margin + 1, rows)),
+        slice(max(int(known_cols[0]) - margin, 0), min(int(known_cols[-1]) + margin + 1, cols)),
+    )
 
 
 def extract_frontiers(
@@ -473,10 +497,24 @@ def extract_frontiers(
     reach = grid.free if reachable is None else np.asarray(reachable, dtype=bool)
     if reach.shape != grid.shape:
         raise ValueError(f"reachable has shape {reach.shape}, the map {grid.shape}")
-    cells = frontier_cells(grid, config)
+    # The work runs on the known part of the map; positions come back in the map's cells.
+    rows, cols = _work_window(grid, reach, max(config.min_free_width, 2))
+    offset = (rows.start, cols.start)
+    window = GridMap(
+        cells=grid.cells[rows, cols],
+        resolution=grid.resolution,
+        origin=(
+            grid.origin[0] + cols.start * grid.resolution,
+            grid.origin[1] + rows.start * grid.resolution,
+        ),
+    )
+    reach = reach[rows, cols]
+    cells = frontier_cells(window, config)
     labels, count = cluster_frontiers(cells, grid.resolution, config)
     frontier_rows, frontier_cols = np.nonzero(labels)
     owner = labels[frontier_rows, frontier_cols]
+    frontier_rows = frontier_rows + offset[0]
+    frontier_cols = frontier_cols + offset[1]
     sizes = np.bincount(owner, minlength=count + 1)[1:].astype(np.float64)
     safe = np.maximum(sizes, 1.0)
     centroid_cells = np.stack(
@@ -487,7 +525,7 @@ def extract_frontiers(
         axis=1,
     ).reshape(-1, 2)
     goal_cells, valid = _goal_cells(
-        labels, count, centroid_cells, reach, grid.resolution, config.max_goal_offset
+        labels, count, centroid_cells, reach, grid.resolution, config.max_goal_offset, offset
     )
     order = np.flatnonzero(valid)
     order = order[np.argsort(-sizes[order], kind="stable")]
@@ -498,8 +536,12 @@ def extract_frontiers(
     if config.gain_model == "box":
         gains = information_gain(grid, goals, config.sensor_range)
     else:
-        gains = connected_information_gain(grid, labels, goals, config.sensor_range)
+        gains = connected_information_gain(window, labels, goals, config.sensor_range)
     gains = np.minimum(gains, sizes[order] * grid.resolution * config.view_depth)
+    if labels.shape != grid.shape:
+        full_labels = np.zeros(grid.shape, dtype=np.int32)
+        full_labels[rows, cols] = labels
+        labels = full_labels
     return Frontiers(
         labels=labels,
         centroids=grid.cell_to_world(centroid_cells[order]).reshape(-1, 2),
