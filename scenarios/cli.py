@@ -127,6 +127,13 @@ def _build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--steps", type=int, default=1000)
     sim.add_argument("--repeats", type=int, default=3)
     sim.add_argument("--no-irsim", action="store_true", help="skip the IR-SIM comparison")
+    sim.add_argument(
+        "--rl",
+        action="store_true",
+        help="agent-steps/s of the RL configurations (parallel env Dict/flat, SLAM off/on; "
+        "single-robot env; AsyncVectorEnv of 2) on the first scenario (default office), and "
+        "the frontier teammate's ms/step",
+    )
     sim.add_argument("--json", action="store_true")
     slam = kinds.add_parser("slam", help="onboard SLAM: ATE against odometry, map agreement, speed")
     slam.add_argument(
@@ -427,6 +434,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         return _cmd_bench_explore(args)
     if args.bench == "soak":
         return _cmd_bench_soak(args)
+    if args.rl:
+        return _cmd_bench_sim_rl(args)
     from mrslam_env.registry import available_scenarios, build_world
     from scenarios.bench.sim import bench_sim
 
@@ -448,6 +457,29 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         print(
             f"{row.scenario:<14} {row.mrslam_steps_per_s:>10.0f} {theirs:>10} {ratio:>7} {slam:>10}"
         )
+    return 0
+
+
+def _cmd_bench_sim_rl(args: argparse.Namespace) -> int:
+    from scenarios.bench.sim import bench_rl
+
+    scenario = args.scenarios[0] if args.scenarios else "office"
+    rows, teammate = bench_rl(scenario, n_steps=args.steps, repeats=args.repeats)
+    if args.json:
+        out = {"scenario": scenario, "rows": [row.as_dict() for row in rows]}
+        print(json.dumps({**out, "teammate": teammate.as_dict()}, indent=2))
+        return 0
+    print(f"{scenario}: 2 robots x 360 beams, median of {args.repeats} x {args.steps} steps")
+    print(f"{'configuration':<60} {'agent-steps/s':>13} {'env steps/s':>11}")
+    for row in rows:
+        print(
+            f"{row.configuration:<60} {row.agent_steps_per_s:>13.0f} {row.env_steps_per_s:>11.0f}"
+        )
+    print(
+        f"frontier teammate: {teammate.explorer_ms_per_step:.2f} ms/step explorer, "
+        f"{teammate.robot_map_ms_per_step:.2f} ms/step reading its map, "
+        f"{teammate.replans_per_100_steps:.1f} replans per 100 steps"
+    )
     return 0
 
 

@@ -105,3 +105,25 @@ def test_gymnasium_check_env_on_the_single_robot_env(teammates: str, slam: bool)
         assert made.observation_space.contains(observation) and not terminated
     assert truncated
     made.close()
+
+
+def test_throughput_benchmark_times_every_rl_configuration() -> None:
+    from scenarios.bench.sim import bench_rl
+
+    rows, teammate = bench_rl(SCENARIO, n_steps=12, repeats=1)
+    names = [row.configuration for row in rows]
+    assert names == [
+        "parallel, Dict, SLAM off",
+        "parallel, Dict, SLAM on",
+        "parallel, flat, SLAM off",
+        "parallel, flat, SLAM on",
+        "single-robot env, 1 idle teammate, SLAM on",
+        "single-robot env, 1 frontier teammate, SLAM on",
+        "AsyncVectorEnv, 2 processes x single-robot env (frontier)",
+    ]
+    for row in rows[:4]:  # two robots act in each parallel env step
+        assert row.agent_steps_per_s == pytest.approx(2 * row.env_steps_per_s)
+    assert all(row.agent_steps_per_s > 0 for row in rows)
+    figures = teammate.as_dict()
+    assert figures["explorer_ms_per_step"] > 0 and figures["robot_map_ms_per_step"] > 0
+    assert figures["replans_per_100_steps"] > 0  # the first step plans
