@@ -22,6 +22,7 @@ near a taken one are discounted so that two robots do not explore the same place
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import deque
 from dataclasses import dataclass, field
@@ -36,13 +37,17 @@ from agents.planning import (
     CostGrid,
     DistanceField,
     PlannerConfig,
+    best_goal_field,
     distance_field,
     inflate,
+    reachable_cells,
     shorten_path,
 )
+from agents.policy import PolicyContext
 from mrslam_env.config import EnvConfig
 from mrslam_env.geometry import compose, transform_points, world_to_cell
 from mrslam_env.gridmap import OCCUPIED, GridMap
+from mrslam_env.slam.grid import trusted_gridmap
 from mrslam_env.slam.scan import mask_returns_near, sighted_positions
 from mrslam_env.validation import check_fields, require
 
@@ -51,6 +56,7 @@ __all__ = [
     "ExplorerPolicy",
     "ExplorerStatus",
     "assign_frontiers",
+    "frontier_policy",
     "frontier_utility",
     "team_frontier_goals",
 ]
@@ -303,11 +309,16 @@ def team_frontier_goals(
     return goals, frontiers
 
 
+@functools.lru_cache(maxsize=16)
 def _disk_offsets(radius_cells: float) -> IntArray:
+    """Cell offsets (K, 2) within ``radius_cells`` of the centre; read-only and cached (the
+    robot's footprint, asked for on every step)."""
     reach = math.ceil(radius_cells)
     rows, cols = np.mgrid[-reach : reach + 1, -reach : reach + 1]
     inside = rows**2 + cols**2 <= radius_cells**2
-    return np.stack([rows[inside], cols[inside]], axis=1).astype(np.int64)
+    offsets = np.stack([rows[inside], cols[inside]], axis=1).astype(np.int64)
+    offsets.flags.writeable = False
+    return offsets
 
 
 ESCAPE_AFTER_STEPS = 25
@@ -505,7 +516,7 @@ class ExplorerPolicy:
     def act(
         self,
         observation: dict[str, Any],
-        robot_map: GridMap,
+        robot_map: GridMap | PolicyContext,
         *,
         pose_in_map: ArrayLike | None = None,
     ) -> NDArray[np.float32]:
@@ -516,12 +527,15 @@ class ExplorerPolicy:
         observation : dict
             The env observation of this robot; uses ``pose`` (unless ``pose_in_map`` is
             given) and ``scan`` (a guard against obstacles the map misses).
-        robot_map : GridMap
+        robot_map : GridMap or PolicyContext
             The map to explore (the robot's own, or a merged one), in the frame of the
-            pose.
+            pose; or the team's context (the exploration-policy protocol,
+            :meth:`act_in_context`).
         pose_in_map : array_like, shape (3,), optional
             The robot's pose in ``robot_map``'s frame, when that is not its own map frame.
         """
+        if isinstance(robot_map, PolicyContext):
+            return self.act_in_context(observation, robot_map)
         self._step += 1
         pose = np.asarray(
             observation["pose"] if pose_in_map is None else pose_in_map, dtype=np.float64
@@ -562,6 +576,22 @@ class ExplorerPolicy:
         if self._given_goal is not None and self.follower.status == "reached":
             self.status = "arrived"
         return action
+
+    def act_in_context(
+        self, observation: dict[str, Any], context: PolicyContext
+    ) -> NDArray[np.float32]:
+        """The exploration-policy protocol's ``act`` (:mod:`agents.policy`): explore
+        ``context.map`` from ``context.pose``, passing round the teammates and leaving
+        their targets to them; a ``context.goal`` is driven to as a given goal
+        (:meth:`set_goal`) until another one comes or :meth:`clear_goal`."""
+        self.set_teammates(context.teammates)
+        self.set_teammate_targets(context.teammate_targets)
+        if context.goal is not None:
+            goal = np.asarray(context.goal, dtype=np.float64).reshape(-1)[:2]
+            given = self._given_goal
+            if given is None or float(np.hypot(*(goal - given))) > self.config.goal_snap / 2:
+                self.set_goal(goal)
+        return self.act(observation, context.map, pose_in_map=context.pose)
 
     def _remember_close_returns(self, scan: Any, pose: FloatArray) -> None:
         """Keep the scan's close returns (map frame) for a while: obstacles the map
@@ -607,7 +637,8 @@ class ExplorerPolicy:
             return grid
         marked = grid.cells.copy()
         marked[cells[:, 0], cells[:, 1]] = OCCUPIED
-        return GridMap(cells=marked, resolution=grid.resolution, origin=grid.origin)
+        # A valid map with cells set OCCUPIED needs no value check.
+        return trusted_gridmap(marked, grid.resolution, grid.origin)
 
     def _clearance(self, scan: Any) -> tuple[float, float] | None:
         if scan is None:
@@ -754,7 +785,10 @@ class ExplorerPolicy:
         self._blacklist = [entry for entry in self._blacklist if entry[2] > self._step]
         try:
             cost_grid = inflate(grid, config.planner)
-            distances = distance_field(cost_grid, pose, snap_distance=config.start_snap)
+            if self._given_goal is not None:
+                distances = distance_field(cost_grid, pose, snap_distance=config.start_snap)
+            else:
+                start, reachable = reachable_cells(cost_grid, pose, snap_distance=config.start_snap)
         except ValueError:
             self.status = "blocked"
             self.follower.clear()
@@ -762,7 +796,7 @@ class ExplorerPolicy:
         if self._given_goal is not None:
             self._plan_to_given_goal(cost_grid, distances)
         else:
-            self._plan_to_frontier(grid, cost_grid, distances)
+            self._plan_to_frontier(grid, cost_grid, start, reachable)
 
     def _follow(self, cost_grid: CostGrid, cells: IntArray, same_goal: bool = False) -> None:
         path = cost_grid.cell_to_world(shorten_path(cost_grid, cells))
@@ -786,14 +820,35 @@ class ExplorerPolicy:
         self.status = "to_goal"
 
     def _plan_to_frontier(
-        self, grid: GridMap, cost_grid: CostGrid, distances: DistanceField
+        self,
+        grid: GridMap,
+        cost_grid: CostGrid,
+        start: tuple[int, int],
+        reachable: NDArray[np.bool_],
     ) -> None:
         config = self.config
-        frontiers = extract_frontiers(grid, config.frontiers, reachable=distances.reachable)
+        frontiers = extract_frontiers(grid, config.frontiers, reachable=reachable)
         self._grid_origin, self._grid_resolution = grid.origin, grid.resolution
         self._frontier_set = frontiers
         self._frontiers = frontiers.centroids
-        choice = self._choose_frontier(frontiers, distances)
+        choice = -1
+        if len(frontiers):
+            # The search stops once no frontier left can beat the best one reached: the
+            # choice, its path cost and its path are those of the whole search.
+            gains, excluded, current = self._utility_parts(frontiers)
+            bound = gains + config.tie_jitter
+            if current >= 0:
+                bound[current] += config.target_bonus
+            bound[excluded | (gains < config.min_gain)] = -np.inf
+            distances = best_goal_field(
+                cost_grid,
+                start,
+                frontiers.goal_cells,
+                bound,
+                cost_weight=config.cost_weight,
+                min_cost=config.follower.goal_tolerance,
+            )
+            choice = self._choose_frontier(frontiers, distances)
         if choice < 0:
             self._empty_replans += 1
             self._target = None
@@ -816,30 +871,40 @@ class ExplorerPolicy:
         cells = world_to_cell(self._target_cells, self._grid_origin, self._grid_resolution)
         return _most_overlapping(frontiers.labels, cells)
 
+    def _utility_parts(self, frontiers: Frontiers) -> tuple[FloatArray, NDArray[np.bool_], int]:
+        """Per frontier, the path-cost-free parts of its utility: the gain after the
+        separation discount, whether it is excluded (a teammate's target, blacklisted),
+        and the index of the current target's frontier (-1 if none)."""
+        config = self.config
+        gains = frontiers.gains * _separation_discount(
+            frontiers.goals, self._teammate_targets, config.separation
+        )
+        excluded = np.zeros(len(frontiers), dtype=bool)
+        if len(self._teammate_targets):
+            # A teammate's own target is taken, however big its gain.
+            radius = self.shared_target_radius
+            excluded |= _separation_discount(frontiers.goals, self._teammate_targets, radius) < 1.0
+        if self._blacklist:
+            points = np.array([(x, y) for x, y, _ in self._blacklist])
+            excluded |= _separation_discount(frontiers.goals, points, config.blacklist_radius) < 1.0
+        return gains, excluded, self._current_frontier(frontiers)
+
     def _choose_frontier(self, frontiers: Frontiers, distances: DistanceField) -> int:
-        """Index of the frontier of highest utility, or -1 when none is worth it."""
+        """Index of the frontier of highest utility, or -1 when none is worth it.
+
+        ``distances`` needs exact path costs only at the goals that could be the best
+        (:func:`~agents.planning.best_goal_field`); elsewhere upper bounds do."""
         config = self.config
         if len(frontiers) == 0:
             return -1
         rows, cols = frontiers.goal_cells.T
         path_costs = distances.cost[rows, cols]
-        gains = frontiers.gains * _separation_discount(
-            frontiers.goals, self._teammate_targets, config.separation
-        )
+        gains, excluded, current = self._utility_parts(frontiers)
         utility = frontier_utility(gains, path_costs, config.cost_weight, min_gain=config.min_gain)
-        if len(self._teammate_targets):
-            # A teammate's own target is taken, however big its gain.
-            radius = self.shared_target_radius
-            taken = _separation_discount(frontiers.goals, self._teammate_targets, radius) < 1.0
-            utility[taken] = -np.inf
-        if self._blacklist:
-            points = np.array([(x, y) for x, y, _ in self._blacklist])
-            near = _separation_discount(frontiers.goals, points, config.blacklist_radius) < 1.0
-            utility[near] = -np.inf
+        utility[excluded] = -np.inf
         # A goal next to the robot reveals nothing new: its frontier is what the robot
         # cannot see from here.
         utility[path_costs < config.follower.goal_tolerance] = -np.inf
-        current = self._current_frontier(frontiers)
         if current >= 0 and np.isfinite(utility[current]):
             utility[current] += config.target_bonus
         utility += config.tie_jitter * self.rng.random(len(utility))
@@ -878,3 +943,9 @@ def _nearest_reachable(
     if squared[best] > radius**2:
         return None
     return np.asarray(candidates[best], dtype=np.int64)
+
+
+def frontier_policy(env: EnvConfig, rng: np.random.Generator) -> ExplorerPolicy:
+    """The exploration-policy factory (:data:`agents.policy.PolicyFactory`) of the frontier
+    explorer, the team's default: ``mrslam run --policy agents.explorer:frontier_policy``."""
+    return ExplorerPolicy.for_env(env, rng)

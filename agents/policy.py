@@ -16,7 +16,31 @@ env's normalised ``(v, omega)`` in [-1, 1], float32 (2,).
 A policy is built by a factory ``factory(env, rng) -> ExplorationPolicy``, one per robot:
 ``env`` is the :class:`~mrslam_env.config.EnvConfig` (the robot and its sensors) and ``rng``
 the robot's own generator. ``mrslam run --policy module:factory`` and ``mrslam bench
-explore --policy module:factory`` load one with :func:`load_policy_factory`.
+explore --policy module:factory`` load one with :func:`load_policy_factory`; built in are
+``agents.explorer:frontier_policy`` (the default) and ``agents.wander:wander_policy``.
+
+**What the team does itself.** The team drives a robot to a given goal (a rendezvous
+meeting point) with its own planner and path follower, not with the policy: verification
+works whatever the policy does. The policy acts whenever the robot explores.
+
+**Optional capabilities.** The team uses these when a policy has them, and does without
+otherwise (the frontier explorer, :class:`agents.explorer.ExplorerPolicy`, has them all):
+
+==========================  ============================================================
+``target``                  (2,) or None: where the policy is heading, in
+                            ``context.map``'s frame; shared with the teammates (their
+                            ``teammate_targets``). A policy without it is assigned a
+                            frontier as ``context.goal``
+``request_replan()``        choose again (two robots chose one target; the later yields)
+``shared_target_radius``    m: targets this close count as one (default: a quarter of
+                            the explorer's separation)
+``change_frame(T)``         the map frame changes by the SE(2) ``T = new_from_old`` (the
+                            robot joined the common frame): carry what is remembered in
+                            map coordinates over
+``done``                    True when nothing is left to explore (the run may stop early)
+``plan``, ``frontiers``     (P, 2) / (F, 2) points in ``context.map``'s frame, drawn in
+                            the recording
+==========================  ============================================================
 """
 
 from __future__ import annotations
@@ -32,7 +56,14 @@ from numpy.typing import NDArray
 from mrslam_env.config import EnvConfig
 from mrslam_env.gridmap import GridMap
 
-__all__ = ["ExplorationPolicy", "PolicyContext", "PolicyFactory", "load_policy_factory"]
+__all__ = [
+    "ExplorationPolicy",
+    "PolicyContext",
+    "PolicyFactory",
+    "build_policy",
+    "load_policy_factory",
+    "policy_label",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -69,6 +100,9 @@ class PolicyContext:
     goal : ndarray, shape (2,) or None
         A point the team assigns this robot in ``map``'s frame (a frontier it owns after
         coordination), or None: the policy is free to choose.
+    common_from_own : ndarray, shape (3,) or None
+        The SE(2) transform from the robot's own map frame into the common frame once the
+        robot is in it (``map``'s frame then), else None.
     """
 
     robot: int
@@ -80,6 +114,7 @@ class PolicyContext:
     teammates: FloatArray = field(default_factory=_no_points)
     teammate_targets: FloatArray = field(default_factory=_no_points)
     goal: FloatArray | None = None
+    common_from_own: FloatArray | None = None
 
 
 @runtime_checkable
@@ -109,7 +144,7 @@ def load_policy_factory(spec: str) -> PolicyFactory:
             module = _module_from_path(module_name)
         else:
             module = importlib.import_module(module_name)
-    except (ImportError, OSError) as error:
+    except (ImportError, OSError, SyntaxError) as error:
         raise ValueError(f"policy {spec!r}: cannot import {module_name!r} ({error})") from error
     factory = getattr(module, attribute, None)
     if factory is None or not callable(factory):
@@ -130,3 +165,35 @@ def _module_from_path(path: str) -> Any:
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def build_policy(
+    factory: PolicyFactory, env: EnvConfig, rng: np.random.Generator, name: str = ""
+) -> ExplorationPolicy:
+    """``factory(env, rng)``, checked: ``ValueError`` with one line when the factory fails
+    to be called so or returns something without ``reset()`` and ``act(observation,
+    context)``. ``name`` (the spec) names the policy in the message."""
+    label = name or getattr(factory, "__name__", repr(factory))
+    try:
+        policy = factory(env, rng)
+    except TypeError as error:
+        raise ValueError(f"policy {label!r}: calling factory(env, rng) failed ({error})") from error
+    if not isinstance(policy, ExplorationPolicy):
+        raise ValueError(
+            f"policy {label!r}: the factory returned {type(policy).__name__}, which has no "
+            "reset() and act(observation, context) (agents.policy.ExplorationPolicy)"
+        )
+    return policy
+
+
+def policy_label(spec: str | None) -> str:
+    """A short name for a policy spec in tables and reports: ``"frontier"`` for None (the
+    default), ``module:factory`` with a file path shortened to its stem."""
+    if spec is None:
+        return "frontier"
+    module_name, _, attribute = spec.partition(":")
+    if module_name.endswith(".py"):
+        from pathlib import Path
+
+        module_name = Path(module_name).stem
+    return f"{module_name}:{attribute}"

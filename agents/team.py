@@ -16,7 +16,34 @@ The coordinator uses the other robot's data only while the comm link is up: maps
 and sightings are exchanged then; a map received earlier stays usable (it is the robot's
 copy), but is not refreshed while the link is down.
 
-Two robots (``robot_0`` holds the team frame: the merged map is in robot 0's map frame).
+``robot_0`` holds the team frame: the merged map is in robot 0's map frame.
+
+**N robots** (2 to 8). Each robot belongs to a group, the robots that verified transforms
+connect it to, held in the frame of the group's lowest robot (its root); the common frame
+is robot 0's group. Any two robots of different groups that can talk may merge their
+groups' maps; the states above are then those of that pair (one merge or rendezvous at a
+time, pairs that bring a robot into robot 0's frame first), told as two robots: each
+robot's pose in its root's frame, the partner's peer row. An accepted (refined) transform
+joins the second group to the first, its robots' transforms composed with it: a robot
+joins robot 0's frame when any verified edge reaches its group. The transforms are
+chained along the graph, not refined jointly; each join is refined once, against the
+merged map of the group it joins. Maps are relayed through teammates (the link graph's
+components). The robots in robot 0's frame explore the merged map and share frontiers;
+the others explore alone. With two robots this is, step for step, the two-robot team.
+
+**Policies.** Each robot explores with an exploration policy
+(:class:`agents.policy.ExplorationPolicy`, built per robot by a factory; the frontier
+explorer by default): whenever the team does not drive the robot itself it asks
+``policy.act(observation, context)``. The team drives the legs to a given goal (a
+rendezvous meeting point) itself, with a frontier explorer of its own used only for given
+goals (:attr:`TeamCoordinator.explorers`; for the frontier explorer that is the policy
+itself), so verification works whatever the policy does. What the team shares while
+coordinating uses the policy's optional capabilities when it has them (module notes of
+:mod:`agents.policy`): its ``target`` is shared with the teammates, ``request_replan()``
+makes the later robot yield a target two chose, ``change_frame()`` carries its memory into the
+common frame. A policy without a ``target`` is assigned a frontier of the merged map as
+its context's ``goal`` instead (:func:`agents.explorer.team_frontier_goals`, every
+``ExplorerConfig.replan_interval`` steps), which it may follow or ignore.
 """
 
 from __future__ import annotations
@@ -28,10 +55,11 @@ from enum import StrEnum
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
-from agents.explorer import ExplorerConfig, ExplorerPolicy
+from agents.explorer import ExplorerConfig, ExplorerPolicy, team_frontier_goals
 from agents.planning import distance_field, inflate
+from agents.policy import ExplorationPolicy, PolicyContext, PolicyFactory, build_policy
 from agents.rendezvous import (
     RendezvousConfig,
     choose_meeting_point,
@@ -44,7 +72,7 @@ from agents.robot import DEFAULT_ENV, EnvFigures, build_for_env, check_against_e
 from mrslam_env.config import EnvConfig
 from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import GridMap
-from mrslam_env.merge.fuse import fuse_maps, resample_map
+from mrslam_env.merge.fuse import fuse_maps, resample_map, warp_map
 from mrslam_env.merge.pipeline import (
     MergeConfig,
     MergeInputError,
@@ -181,6 +209,8 @@ class MergeAttempt:
     """With its trace: ``merge_maps(map0, map1, ..., trace=True)``."""
     map0: GridMap
     map1: GridMap
+    robots: tuple[int, int] = (0, 1)
+    """The robots whose maps (their groups' maps, in the groups' root frames) were merged."""
 
 
 @dataclass(slots=True)
@@ -266,8 +296,7 @@ def _either_in_sight(
 
 
 class TeamCoordinator:
-    """Drives two :class:`~agents.explorer.ExplorerPolicy` robots through the four kinds of
-    interaction.
+    """Drives a team of N robots through the four kinds of interaction (module notes).
 
     Parameters
     ----------
@@ -275,81 +304,224 @@ class TeamCoordinator:
         Defaults to the default env's robots and sensors; :meth:`for_env` follows a given
         env's.
     rng : numpy.random.Generator
-        All randomness (explorers' tie-breaking, merging).
+        All randomness (policies' and explorers' tie-breaking, merging).
+    n_robots : int
+        Team size (>= 2; the env's ``n_robots``).
+    policy_factory : PolicyFactory, optional
+        Builds each robot's exploration policy (``factory(env, rng)``, the robot's own
+        generator drawn from ``rng``); None: the frontier explorer with ``config.explorer``.
+    env : EnvConfig, optional
+        What ``policy_factory`` is given (default: the default env).
+
+    Attributes
+    ----------
+    policies : list of ExplorationPolicy
+        Each robot's policy.
+    explorers : list of ExplorerPolicy
+        What drives each robot's legs to a given goal: the policy itself when it is a
+        frontier explorer, else one of the team's own.
+    roots : list of int
+        Per robot, the lowest robot of its group (the robots its verified transforms
+        connect it to); the common frame is the group of robot 0.
+    frames : list of ndarray (3,)
+        Per robot, ``root_from_map``: its map frame in its group root's map frame (robot
+        0's, the common frame, once it joined).
+    pair : tuple of int
+        The two robots whose groups are being merged (side 0, side 1; the lower root
+        first), or were last.
 
     Use: each step call :meth:`act` with the env observations and a function giving robot
-    i's current own map; read :attr:`state`, :attr:`transform`, :attr:`merged_map`,
-    :attr:`rendezvous_point` and the explorers for recording; :meth:`pop_decisions`
-    returns what was decided since the last call.
+    i's current own map; read :attr:`state`, :meth:`common_transform`, :attr:`merged_map`,
+    :attr:`rendezvous_point`, :meth:`plan_of` and :meth:`frontiers_of` for recording;
+    :meth:`pop_decisions` returns what was decided since the last call.
     """
 
-    def __init__(self, config: TeamConfig | None = None, *, rng: np.random.Generator) -> None:
+    def __init__(
+        self,
+        config: TeamConfig | None = None,
+        *,
+        rng: np.random.Generator,
+        n_robots: int = 2,
+        policy_factory: PolicyFactory | None = None,
+        env: EnvConfig | None = None,
+    ) -> None:
+        if not isinstance(n_robots, int) or isinstance(n_robots, bool) or n_robots < 2:
+            raise ValueError(f"a team needs n_robots >= 2, got {n_robots!r}")
         self.config = config if config is not None else TeamConfig()
         self.rng = rng
-        self.explorers = [
-            ExplorerPolicy(np.random.default_rng(rng.integers(2**63)), self.config.explorer)
-            for _ in range(2)
-        ]
+        self.n_robots = n_robots
+        self.policies: list[ExplorationPolicy] = []
+        self.explorers: list[ExplorerPolicy] = []
+        for _ in range(n_robots):
+            seed = rng.integers(2**63)
+            policy: ExplorationPolicy
+            if policy_factory is None:
+                explorer = ExplorerPolicy(np.random.default_rng(seed), self.config.explorer)
+                policy = explorer
+            else:
+                env_config = env if env is not None else DEFAULT_ENV
+                policy = build_policy(policy_factory, env_config, np.random.default_rng(seed))
+                if isinstance(policy, ExplorerPolicy):
+                    explorer = policy
+                else:  # the team's own explorer drives the legs to a given goal
+                    goal_rng = np.random.default_rng([int(seed), 1])
+                    explorer = ExplorerPolicy(goal_rng, self.config.explorer)
+            self.policies.append(policy)
+            self.explorers.append(explorer)
+        n = n_robots
         self.state = TeamState.NO_INTERACTION
         self.step = 0
-        self.transform: FloatArray | None = None
-        """``map0_from_map1`` once verified (refined), else None."""
-        self.preliminary_transform: FloatArray | None = None
-        """The verified hypothesis before refinement."""
+        self.roots = list(range(n))
+        self.frames: list[FloatArray] = [np.zeros(3) for _ in range(n)]
+        self.verified: list[FloatArray | None] = [None] * n
+        """Per robot, ``common_from_map`` as verified (the hypotheses before refinement,
+        composed), once it joined the common frame; None before."""
+        self.step_joined: list[int | None] = [0] + [None] * (n - 1)
+        self.pair: tuple[int, int] = (0, 1)
         self.hypotheses: list[FloatArray] = []
-        self.rejected: list[FloatArray] = []
-        """Hypotheses a rendezvous rejected: the maps' frames never move, so they stay
-        wrong and are not tried again."""
+        """The current pair's hypotheses (``side0_from_side1``: group frame from group
+        frame), best first."""
+        self._rejected: dict[tuple[int, int], list[FloatArray]] = {}
+        """Per pair of group roots, the hypotheses a rendezvous rejected: the maps' frames
+        never move, so they stay wrong and are not tried again."""
         self.hypotheses_tested = 0
-        self.step_verified: int | None = None
-        self.views: list[GridMap | None] = [None, None]
-        """Per robot, the merged map it explores, in map 0's frame: its own map, current,
-        fused with the other robot's as it last received it. The two are one map while
-        the link is up; while it is down, each robot still sees all of its own mapping
-        (a robot exploring on a stale copy of its own map drives to frontiers it has
-        already explored)."""
+        self.views: list[GridMap | None] = [None] * n
+        """Per robot in the common frame, the merged map it explores, in robot 0's frame:
+        its own map, current, fused with the others' as it last received them. One map
+        while every link among them is up; while one is down, each robot still sees all
+        of its own mapping (a robot exploring on a stale copy of its own map drives to
+        frontiers it has already explored)."""
         self.rendezvous: _Rendezvous | None = None
         self._decisions: list[Decision] = []
         self._merge_attempts: list[MergeAttempt] = []
         self._merges_tried = 0
-        self._received: list[GridMap | None] = [None, None]
-        """Per robot, the other robot's map as it last received it (while the link was
-        up)."""
+        self._received: dict[tuple[int, int], GridMap] = {}
+        """``(i, j)``: robot j's map as robot i last received it (while they could talk,
+        directly or through teammates)."""
         self._last_merge_step = -(10**9)
         self._last_refine_step = 0
-        self._retry_area = 0.0
+        self._retry_area: dict[tuple[int, int], float] = {}
+        """Per pair of group roots: the area the maps must know before the next attempt."""
+        self._poses = [np.zeros(3) for _ in range(n)]
         self._last_poses = [np.zeros(3), np.zeros(3)]
+        """The current pair's poses, each in its group root's frame."""
         self._last_observations: list[dict[str, Any]] = []
+        """The current pair's observations, as two robots see each other (``peer`` and
+        ``comm`` of the partner only)."""
+        self._links = np.zeros((n, n), dtype=bool)
+        self._reach = np.eye(n, dtype=bool)
         self._link = False
-        self._verified_at = np.zeros(2)
-        """Robot 1's position (map 1) when the hypothesis was accepted."""
-        self._shared: list[tuple[FloatArray | None, FloatArray | None]] = [(None, None)] * 2
-        """Per robot, its position and target in map 0's frame as last shared over the
-        link (coordinated exploration)."""
+        """The current pair's link."""
+        self._verified_at: list[FloatArray] = [np.zeros(2) for _ in range(n)]
+        """Per robot, its position (own map) when the hypothesis that joined it was
+        accepted."""
+        self._shared: dict[tuple[int, int], tuple[FloatArray, FloatArray | None]] = {}
+        """``(i, j)``: robot j's position and target in the common frame as robot i last
+        received them (coordinated exploration)."""
+        self._on_goal = [False] * n
+        """Per robot, whether the team drives it to a given goal (else its policy acts)."""
+        self._assigned: list[FloatArray | None] = [None] * n
+        """Per robot whose policy has no ``target``: the frontier the team assigned it
+        while coordinating (its context's ``goal``)."""
+        self._last_assignment = -(10**9)
+        self._group_maps: dict[int, tuple[tuple[int, ...], int, GridMap]] = {}
+        """Per group root (groups outside the common frame): its members, the step and
+        the fusion of their maps in its frame."""
+        self._maps: MapSource = _no_map
+        """The robots' own maps (the last ``maps`` given to :meth:`act`)."""
 
     @classmethod
     def for_env(
-        cls, env: EnvConfig, *, rng: np.random.Generator, config: TeamConfig | None = None
+        cls,
+        env: EnvConfig,
+        *,
+        rng: np.random.Generator,
+        config: TeamConfig | None = None,
+        n_robots: int = 2,
+        policy_factory: PolicyFactory | None = None,
     ) -> TeamCoordinator:
         """A team for the env's robots and sensors: ``config`` (checked against the env)
-        or :meth:`TeamConfig.for_env`."""
+        or :meth:`TeamConfig.for_env`; ``policy_factory`` builds the policies for ``env``."""
         if config is None:
             config = TeamConfig.for_env(env)
         config.check_env(env)
-        return cls(config, rng=rng)
+        return cls(config, rng=rng, n_robots=n_robots, policy_factory=policy_factory, env=env)
 
     # --- what recording reads -----------------------------------------------------------
 
     @property
+    def members(self) -> list[int]:
+        """The robots in the common frame (robot 0's group), in index order."""
+        return [i for i in range(self.n_robots) if self.roots[i] == 0]
+
+    def common_transform(self, robot: int) -> FloatArray | None:
+        """``map0_from_map<robot>`` once ``robot`` joined the common frame, else None."""
+        return self.frames[robot].copy() if self.roots[robot] == 0 else None
+
+    @property
+    def transform(self) -> FloatArray | None:
+        """``map0_from_map1`` once robot 1 joined (refined), else None (two robots)."""
+        return None if self.step_joined[1] is None else self.frames[1]
+
+    @property
+    def preliminary_transform(self) -> FloatArray | None:
+        """Robot 1's ``map0_from_map1`` as verified, before refinement, or None."""
+        return self.verified[1]
+
+    @property
+    def step_verified(self) -> int | None:
+        """The step of the first verified merge, or None."""
+        steps = [s for s in self.step_joined[1:] if s is not None]
+        return min(steps) if steps else None
+
+    @property
+    def rejected(self) -> list[FloatArray]:
+        """The current pair's rejected hypotheses."""
+        return self._rejected.setdefault(self._pair_roots(), [])
+
+    @property
     def merged_map(self) -> GridMap | None:
-        """Robot 0's view of the merged map (its own map and robot 1's as last received),
-        in map 0's frame, or None before a merge; robot 1 explores :attr:`views` ``[1]``."""
+        """Robot 0's view of the merged map (its own map and the others' as last
+        received), in map 0's frame, or None before a merge; robot i explores
+        :attr:`views` ``[i]``."""
         return self.views[0]
 
     @property
     def rendezvous_point(self) -> FloatArray | None:
-        """The meeting point in map 0's frame while verifying, else None."""
+        """The meeting point in the frame of side 0's group root while verifying."""
         return None if self.rendezvous is None else self.rendezvous.meeting_point.copy()
+
+    def plan_of(self, robot: int) -> FloatArray:
+        """The path ``robot`` follows, (P, 2) in the frame of the map it explores: the
+        team's on a leg to a given goal, else its policy's ``plan`` (empty if it has none)."""
+        source: Any = self.explorers[robot] if self._on_goal[robot] else self.policies[robot]
+        return _points(getattr(source, "plan", None))
+
+    def frontiers_of(self, robot: int) -> FloatArray:
+        """The frontiers ``robot``'s policy found (its ``frontiers``, (F, 2)), or empty."""
+        return _points(getattr(self.policies[robot], "frontiers", None))
+
+    def done(self, robot: int) -> bool:
+        """Whether ``robot``'s policy reports that nothing is left to explore (its
+        ``done``; a policy without one never is)."""
+        return bool(getattr(self.policies[robot], "done", False))
+
+    def coordinated(self, robot: int) -> bool:
+        """Whether ``robot`` explores the merged map in the common frame."""
+        return self.roots[robot] == 0 and self.views[robot] is not None
+
+    def explored_frame(self, robot: int) -> FloatArray | None:
+        """``root_from_explored``: from the frame of the map ``robot`` explores (the
+        common frame while coordinated, else its own) to its group root's frame; None
+        when they are one frame."""
+        if self.coordinated(robot) or self.roots[robot] == robot:
+            return None
+        return self.frames[robot]
+
+    def pose_in_root(self, robot: int, pose: ArrayLike) -> FloatArray:
+        """``robot``'s SLAM ``pose`` (own map frame) in its group root's frame."""
+        pose = np.asarray(pose, dtype=np.float64)
+        return pose if self.roots[robot] == robot else compose(self.frames[robot], pose)
 
     def pop_decisions(self) -> list[Decision]:
         decisions, self._decisions = self._decisions, []
@@ -366,58 +538,206 @@ class TeamCoordinator:
     # --- the step -----------------------------------------------------------------------
 
     def act(self, observations: list[dict[str, Any]], maps: MapSource) -> list[NDArray[np.float32]]:
-        """Actions for both robots (normalised ``(v, omega)``).
+        """Actions for all robots (normalised ``(v, omega)``).
 
         Parameters
         ----------
         observations : list of dict
-            The env observations of robot 0 and robot 1 (``pose``, ``scan``, ``peer``,
+            The env observations of robot 0, 1, ... (``pose``, ``scan``, ``peer``,
             ``comm``).
         maps : callable
             ``maps(i)`` is robot i's current own map (called only when needed).
         """
         self.step += 1
-        link = bool(observations[0]["comm"][0]) and bool(observations[1]["comm"][0])
-        self._last_poses = [np.asarray(o["pose"], dtype=np.float64) for o in observations]
-        self._last_observations = observations
-        self._link = link
+        n = self.n_robots
+        self._maps = maps
+        self._poses = [np.asarray(o["pose"], dtype=np.float64) for o in observations]
+        links = np.zeros((n, n), dtype=bool)
+        for i in range(n):
+            for j in range(i + 1, n):
+                up = bool(observations[i]["comm"][_row(i, j)])
+                up = up and bool(observations[j]["comm"][_row(j, i)])
+                links[i, j] = links[j, i] = up
+        self._links, self._reach = links, _reachable(links)
+        self._observe_pair(observations)
         if self.config.interaction:
-            if self.state is TeamState.NO_INTERACTION and link:
-                self._maybe_generate(maps)
+            if self.state in (TeamState.NO_INTERACTION, TeamState.COORDINATED_EXPLORATION):
+                self._maybe_generate(observations, maps)
             if self.state is TeamState.HYPOTHESIS_VERIFICATION:
-                self._verify(observations, maps, link)
-            if self.state is TeamState.COORDINATED_EXPLORATION:
-                self._keep_merged_map(maps, link)
-        if self.state is TeamState.COORDINATED_EXPLORATION and self.merged_map is not None:
-            return self._act_coordinated(observations)
-        return [self.explorers[i].act(observations[i], maps(i)) for i in range(2)]
+                self._verify(self._last_observations, self._side_maps(maps), self._link)
+            if len(self.members) > 1:
+                self._keep_merged_map(maps)
+        if len(self.members) > 1 and self.merged_map is not None:
+            return self._act_coordinated(observations, maps)
+        return [self.act_alone(i, observations[i], maps(i)) for i in range(n)]
+
+    def act_alone(
+        self, robot: int, observation: dict[str, Any], own_map: GridMap
+    ) -> NDArray[np.float32]:
+        """``robot``'s action on its own map, in its own frame, knowing no teammate (the
+        team's step outside the common frame; the one-robot baseline calls it directly)."""
+        if self._on_goal[robot]:
+            return self.explorers[robot].act(observation, own_map)
+        pose = np.asarray(observation["pose"], dtype=np.float64)
+        context = PolicyContext(
+            robot=robot, step=self.step, map=own_map, pose=pose, own_map=own_map
+        )
+        return self.policies[robot].act(observation, context)
+
+    # --- the pair being merged ------------------------------------------------------------
+
+    def _pair_roots(self) -> tuple[int, int]:
+        return self.roots[self.pair[0]], self.roots[self.pair[1]]
+
+    def _set_pair(self, a: int, b: int) -> None:
+        """Merge the groups of robots ``a`` and ``b`` next: side 0 is the lower root's."""
+        self.pair = (a, b) if self.roots[a] < self.roots[b] else (b, a)
+
+    def _observe_pair(self, observations: list[dict[str, Any]]) -> None:
+        """The current pair as two robots: poses in their group roots' frames, each one's
+        peer row and link of the other."""
+        a, b = self.pair
+        pair_view = []
+        for me, other in ((a, b), (b, a)):
+            observation = observations[me]
+            row = _row(me, other)
+            pose = self.pose_in_root(me, self._poses[me])
+            pair_view.append(
+                {
+                    **observation,
+                    "pose": pose,
+                    "peer": np.asarray(observation["peer"])[row : row + 1],
+                    "comm": np.asarray(observation["comm"])[row : row + 1],
+                }
+            )
+        self._last_observations = pair_view
+        self._last_poses = [o["pose"] for o in pair_view]
+        self._link = bool(self._links[a, b])
+
+    def _group_map(self, robot: int, maps: MapSource) -> GridMap:
+        """The map of ``robot``'s group in its root's frame: the merged map it explores in
+        the common frame; its own map when alone; else its group's maps fused."""
+        view = self.views[robot]
+        if self.roots[robot] == 0 and view is not None:
+            return view
+        root = self.roots[robot]
+        group = [k for k in range(self.n_robots) if k != root and self.roots[k] == root]
+        if not group:
+            return maps(root)
+        # A group's fusion is remade every ``merged_map_every`` steps, as the views are.
+        made = self._group_maps.get(root)
+        fresh = made is not None and self.step - made[1] < self.config.merged_map_every
+        if made is not None and fresh and made[0] == tuple(group):
+            return made[2]
+        grid = maps(root)
+        for k in group:
+            other = maps(k)
+            if not math.isclose(other.resolution, grid.resolution):
+                other = resample_map(other, grid.resolution)
+            grid = fuse_maps(grid, other, self.frames[k])
+        self._group_maps[root] = (tuple(group), self.step, grid)
+        return grid
+
+    def _side_maps(self, maps: MapSource) -> MapSource:
+        """``sides(k)``: the map of the current pair's side k (its group's, in its root's
+        frame)."""
+        cache: dict[int, GridMap] = {}
+
+        def sides(k: int) -> GridMap:
+            if k not in cache:
+                cache[k] = self._group_map(self.pair[k], maps)
+            return cache[k]
+
+        return sides
+
+    def _send(self, side: int, goal: FloatArray) -> None:
+        """Drive the pair's side-``side`` robot to ``goal`` (its group root's frame) with
+        the team's explorer, in the frame of the map it explores."""
+        robot = self.pair[side]
+        if not self.coordinated(robot) and self.roots[robot] != robot:
+            goal = transform_points(inverse(self.frames[robot]), goal[None, :2])[0]
+        self.explorers[robot].set_goal(goal)
+        self._on_goal[robot] = True
+
+    def _release(self, robot: int) -> None:
+        """End ``robot``'s leg to a given goal: its policy explores again."""
+        self.explorers[robot].clear_goal()
+        self._on_goal[robot] = False
+
+    def _release_pair(self) -> None:
+        for robot in self.pair:
+            self._release(robot)
+
+    def _change_frame(self, robot: int, new_from_old: FloatArray) -> None:
+        """``robot`` now explores in another frame: its policy (when it can) and the
+        team's explorer carry what they remember over."""
+        change = getattr(self.policies[robot], "change_frame", None)
+        if change is not None:
+            change(new_from_old)
+        if self.explorers[robot] is not self.policies[robot]:
+            self.explorers[robot].change_frame(new_from_old)
+
+    def _rest(self) -> None:
+        """No merge under way: coordinated if robot 0 has a teammate in its frame."""
+        self.hypotheses = []
+        self.rendezvous = None
+        coordinated = len(self.members) > 1
+        self.state = TeamState.COORDINATED_EXPLORATION if coordinated else TeamState.NO_INTERACTION
 
     # --- 1 -> 2: hypothesis generation ------------------------------------------------------
 
-    def _maybe_generate(self, maps: MapSource) -> None:
-        m0, m1 = maps(0), maps(1)
+    def _candidate_pairs(self) -> list[tuple[int, int]]:
+        """Pairs of robots of two groups that can talk now, those that bring a robot into
+        the common frame first."""
+        n = self.n_robots
+        pairs = [
+            (a, b)
+            for a in range(n)
+            for b in range(a + 1, n)
+            if self._links[a, b] and self.roots[a] != self.roots[b]
+        ]
+        return sorted(pairs, key=lambda p: (min(self.roots[p[0]], self.roots[p[1]]) != 0, p))
+
+    def _maybe_generate(self, observations: list[dict[str, Any]], maps: MapSource) -> None:
+        for a, b in self._candidate_pairs():
+            self._set_pair(a, b)
+            self._observe_pair(observations)
+            if self._generate(self._side_maps(maps)):
+                return
+
+    def _generate(self, sides: MapSource) -> bool:
+        """Merge the current pair's maps; False when they are not ripe for it."""
+        m0, m1 = sides(0), sides(1)
         areas = [np.count_nonzero(~m.unknown) * m.resolution**2 for m in (m0, m1)]
-        if min(areas) < self.config.min_map_area or sum(areas) < self._retry_area:
-            return
+        key = self._pair_roots()
+        if min(areas) < self.config.min_map_area or sum(areas) < self._retry_area.get(key, 0.0):
+            return False
+        a, b = self.pair
         self.state = TeamState.HYPOTHESIS_GENERATION
+        names = "" if self.n_robots == 2 else f" (robot_{a} and robot_{b})"
         self._decide(
-            f"comm up: maps exchanged ({areas[0]:.0f} m² and {areas[1]:.0f} m²), "
+            f"comm up: maps exchanged{names} ({areas[0]:.0f} m² and {areas[1]:.0f} m²), "
             "generating hypotheses by virtual robot motion"
         )
-        self._retry_area = sum(areas) * self.config.regrow_factor
+        self._retry_area[key] = sum(areas) * self.config.regrow_factor
         try:
             result = merge_maps(
                 m0, m1, self.config.merge, rng=self.rng, trace=self.config.keep_merges
             )
         except MergeInputError as error:
             self._decide(f"no hypotheses: {error}")
-            self.state = TeamState.NO_INTERACTION
-            return
+            self._rest()
+            return True
         self._merges_tried += 1
         if self.config.keep_merges:
             self._merge_attempts.append(
                 MergeAttempt(
-                    number=self._merges_tried, step=self.step, result=result, map0=m0, map1=m1
+                    number=self._merges_tried,
+                    step=self.step,
+                    result=result,
+                    map0=m0,
+                    map1=m1,
+                    robots=(a, b),
                 )
             )
         pivot = m1.cell_to_world(np.argwhere(~m1.unknown).mean(axis=0)[None, :])[0]
@@ -430,14 +750,18 @@ class TeamCoordinator:
         self.hypotheses = fresh[: self.config.max_rendezvous]
         if not self.hypotheses:
             self._decide("no hypothesis worth a rendezvous; exploring on, retry when maps grow")
-            self.state = TeamState.NO_INTERACTION
-            return
+            self._rest()
+            return True
         self._decide(f"{len(self.hypotheses)} hypotheses to verify by rendezvous")
-        self._start_rendezvous(0, maps)
+        self._start_rendezvous(0, sides)
+        return True
 
     # --- 3: hypothesis verification -----------------------------------------------------------
 
     def _start_rendezvous(self, index: int, maps: MapSource) -> None:
+        """Put hypothesis ``index`` (or the next one worth it) to a rendezvous; ``maps``
+        gives the pair's side maps."""
+        names = [f"robot_{r}" for r in self.pair]
         while index < len(self.hypotheses):
             hypothesis = self.hypotheses[index]
             if any(hypothesis is rejected for rejected in self.rejected):
@@ -458,13 +782,13 @@ class TeamCoordinator:
                     self.rendezvous = rendezvous
                     self.state = TeamState.HYPOTHESIS_VERIFICATION
                     self._decide(
-                        f"hypothesis #{index}: robot_0 sees robot_1 where predicted from here; "
-                        "confirming while they move"
+                        f"hypothesis #{index}: {names[0]} sees {names[1]} where predicted "
+                        "from here; confirming while they move"
                     )
                     return
                 self._decide(
-                    f"hypothesis #{index} rejected where the robots stand: it puts robot_1 "
-                    "in plain sight of robot_0, and robot_0 does not see it"
+                    f"hypothesis #{index} rejected where the robots stand: it puts "
+                    f"{names[1]} in plain sight of {names[0]}, and {names[0]} does not see it"
                 )
                 self.rejected.append(hypothesis)
                 index += 1
@@ -484,15 +808,15 @@ class TeamCoordinator:
                     meeting_point=point0,
                     started=self.step,
                 )
-                for explorer, goal in zip(self.explorers, (point0, point1), strict=True):
-                    explorer.set_goal(goal)
+                for side, goal in enumerate((point0, point1)):
+                    self._send(side, goal)
                 self.state = TeamState.HYPOTHESIS_VERIFICATION
                 self.hypotheses_tested += 1
                 x, y, theta = hypothesis
                 self._decide(
                     f"rendezvous for hypothesis #{index} (x {x:.2f}, y {y:.2f}, "
                     f"theta {theta:.3f}): meet at ({point0[0]:.2f}, {point0[1]:.2f}) in "
-                    f"robot_0's map, later arrival after ~{cost:.1f} m"
+                    f"robot_{self.roots[self.pair[0]]}'s map, later arrival after ~{cost:.1f} m"
                 )
                 return
             else:
@@ -501,12 +825,12 @@ class TeamCoordinator:
         self._give_up()
 
     def _verify_in_place(self, hypothesis: FloatArray, map0: GridMap) -> bool | None:
-        """A rendezvous of length zero: if the hypothesis puts robot 1 well within the peer
-        sensor's range of robot 0, across space robot 0's map knows to be free, the sensor
-        settles it where they stand (True: seen where predicted; False: not seen). None
-        when the robots have to meet first."""
+        """A rendezvous of length zero: if the hypothesis puts side 1's robot well within
+        the peer sensor's range of side 0's, across space side 0's map knows to be free,
+        the sensor settles it where they stand (True: seen where predicted; False: not
+        seen). None when the robots have to meet first."""
         if not (self._link and self._last_observations):
-            return None  # robot 1's pose is only known over the link
+            return None  # the other robot's pose is only known over the link
         predicted = predicted_relative_pose(self._last_poses[0], self._last_poses[1], hypothesis)
         distance = float(np.hypot(predicted[0], predicted[1]))
         if not 0.5 < distance < self.config.in_sight_range:
@@ -515,7 +839,7 @@ class TeamCoordinator:
         if peer[0] > 0.5:
             seen = sighting_pose(peer[1], peer[2], peer[3])
             return judge_sighting(seen, predicted, self.config.rendezvous).matches
-        # Not seen: only a rejection if the line of sight is known free in robot 0's map.
+        # Not seen: only a rejection if the line of sight is known free in side 0's map.
         sight_range = self.config.in_sight_range
         seen_free = in_plain_sight(self._last_poses[0], predicted, map0, sight_range=sight_range)
         return False if seen_free else None
@@ -536,9 +860,12 @@ class TeamCoordinator:
         return choose_meeting_point(costs[0], cost1_on_0, m0)
 
     def _verify(self, observations: list[dict[str, Any]], maps: MapSource, link: bool) -> None:
+        """One step of the rendezvous; ``observations`` and ``maps`` are the pair's (side
+        0, side 1: poses in the group roots' frames, the partner's peer row)."""
         rendezvous = self.rendezvous
         assert rendezvous is not None
         config = self.config.rendezvous
+        robots = self.pair
         poses = [np.asarray(o["pose"], dtype=np.float64) for o in observations]
         if link:
             if rendezvous.previous is not None:
@@ -554,7 +881,7 @@ class TeamCoordinator:
                     continue
                 seen = sighting_pose(peer[1], peer[2], peer[3])
                 sighting = judge_sighting(seen, expected, config)
-                who = f"robot_{observer} sees robot_{1 - observer}"
+                who = f"robot_{robots[observer]} sees robot_{robots[1 - observer]}"
                 if not sighting.matches:
                     self._reject(
                         rendezvous,
@@ -603,15 +930,15 @@ class TeamCoordinator:
                 self._set_aside(rendezvous, maps, "seen where predicted, but not confirmed")
                 return
             # Seen where predicted: if both robots stand still at the meeting point,
-            # robot 1 drives on so that the sightings test the hypothesis on a motion.
-            if self.explorers[1].status == "arrived":
-                self.explorers[1].clear_goal()
+            # side 1's robot drives on so that the sightings test the hypothesis on a motion.
+            if self.explorers[robots[1]].status == "arrived":
+                self._release(robots[1])
             return
         if rendezvous.in_place:
             if self.step - rendezvous.started >= config.wait_steps:
                 self._set_aside(rendezvous, maps, "lost sight of each other")
             return
-        arrived = all(e.status in ("arrived", "goal_unreachable") for e in self.explorers)
+        arrived = all(self.explorers[r].status in ("arrived", "goal_unreachable") for r in robots)
         if arrived and rendezvous.arrived_at is None:
             rendezvous.arrived_at = self.step
             self._decide("both robots at the rendezvous; waiting for a sighting")
@@ -647,17 +974,18 @@ class TeamCoordinator:
                     f"{unseen} steps, and neither saw the other"
                 )
 
-    def _within_verified(self, transform: FloatArray) -> bool:
-        """Whether ``transform`` stays within the rendezvous tolerances of the verified
-        hypothesis where the robots met: the sighting verified no more than that, and a
+    def _within_verified(
+        self, transform: FloatArray, verified: FloatArray, point: FloatArray
+    ) -> bool:
+        """Whether ``transform`` stays within the rendezvous tolerances of the
+        ``verified`` hypothesis at ``point`` (where the robots met, in the frame
+        ``transform`` maps from): the sighting verified no more than that, and a
         refinement that wanders further (in a building with repeated parts the maps can
         fit another placement better) is not trusted."""
-        assert self.preliminary_transform is not None
         config = self.config.rendezvous
-        point = self._verified_at[None, :]
-        verified = self.preliminary_transform
+        at = np.asarray(point, dtype=np.float64).reshape(1, 2)
         moved = float(
-            np.hypot(*(transform_points(transform, point) - transform_points(verified, point))[0])
+            np.hypot(*(transform_points(transform, at) - transform_points(verified, at))[0])
         )
         turned = abs(math.remainder(float(transform[2] - verified[2]), 2 * math.pi))
         return moved <= config.position_tolerance and turned <= config.heading_tolerance
@@ -666,139 +994,263 @@ class TeamCoordinator:
         """Neither accepted nor rejected: the hypothesis may be proposed again later."""
         self._decide(f"hypothesis #{rendezvous.index} set aside: {why}")
         self.rendezvous = None
-        for explorer in self.explorers:
-            explorer.clear_goal()
+        self._release_pair()
         self._start_rendezvous(rendezvous.index + 1, maps)
 
     def _accept(self, rendezvous: _Rendezvous, maps: MapSource, how: str, error: float) -> None:
-        self.preliminary_transform = rendezvous.hypothesis.copy()
         self._decide(
             f"hypothesis #{rendezvous.index} accepted: {how} (last sighting {error:.2f} m off)"
         )
         m0, m1 = maps(0), maps(1)
-        self._verified_at = self._last_poses[1][:2].copy()
+        verified_at = self._last_poses[1][:2].copy()
         transform, psi, agreement = refine_transform(
             m0, m1, rendezvous.hypothesis, self.config.merge, rng=self.rng
         )
-        if not self._within_verified(transform):
+        if not self._within_verified(transform, rendezvous.hypothesis, verified_at):
             self._decide("the refinement left what the sighting verified; kept the hypothesis")
             transform = rendezvous.hypothesis.copy()
-        self.transform = transform
-        self.step_verified = self.step
-        self._last_refine_step = self.step
         self._decide(
             f"refined by random walk: psi {psi:.3f}, acceptance index {agreement.index:.3f}; "
             "coordinated exploration on the merged map"
         )
         self.rendezvous = None
-        for explorer in self.explorers:
-            explorer.clear_goal()
-        # Robot 1 now explores the merged map, in robot 0's frame.
-        self.explorers[1].change_frame(transform)
-        self.state = TeamState.COORDINATED_EXPLORATION
-        self._received = [m1, m0]
-        self._fuse(maps, shared=True)
+        self._release_pair()
+        self._join(transform, rendezvous.hypothesis, verified_at)
+        self._last_refine_step = self.step
+        self._rest()
+        self._exchange_and_fuse(everyone=False)
 
-    def start_coordinated(self, transform: FloatArray, maps: MapSource) -> None:
-        """Skip merging and verification: coordinate from now on with a known
-        ``map0_from_map1`` (the benchmark's oracle, given the true relative pose).
+    def _join(self, transform: FloatArray, verified: FloatArray, at: FloatArray) -> None:
+        """The pair's groups become one: side 1's group, placed by ``transform`` (refined;
+        ``verified`` before refinement; ``at``: where side 1's robot was, in its root's
+        frame), joins side 0's; robots new in the common frame explore the merged map."""
+        root0, root1 = self._pair_roots()
+        for k in range(self.n_robots):
+            if self.roots[k] != root1:
+                continue
+            old = self.frames[k]
+            self.frames[k] = compose(transform, old) if k != root1 else transform.copy()
+            self.verified[k] = compose(verified, old) if k != root1 else verified.copy()
+            self._verified_at[k] = transform_points(inverse(old), at[None, :])[0]
+            self.roots[k] = root0
+            if root0 == 0:
+                self.step_joined[k] = self.step
+                # Robot k now explores the merged map, in robot 0's frame.
+                self._change_frame(k, self.frames[k])
+
+    def start_coordinated(self, transform: ArrayLike, maps: MapSource) -> None:
+        """Skip merging and verification: coordinate from now on with known transforms
+        (the benchmark's oracle, given the true relative poses): ``map0_from_map1`` (3,),
+        or with more robots (N-1, 3), ``map0_from_map_i`` for i = 1 ... N-1.
 
         What follows is the coordination that follows a verified merge; the robots'
         current maps count as exchanged (at the start, one scan each).
         """
-        transform = np.asarray(transform, dtype=np.float64).copy()
-        self.preliminary_transform = transform.copy()
-        self.transform = transform
-        self.step_verified = self.step
-        self._last_refine_step = self.step
-        self._verified_at = self._last_poses[1][:2].copy()
-        self.hypotheses = []
-        self.rendezvous = None
+        transforms = np.asarray(transform, dtype=np.float64).reshape(-1, 3)
+        if len(transforms) != self.n_robots - 1:
+            raise ValueError(
+                f"start_coordinated needs {self.n_robots - 1} transforms, got {len(transforms)}"
+            )
+        self._maps = maps
         self._decide("relative pose given (oracle): coordinated exploration on the merged map")
-        for explorer in self.explorers:
-            explorer.clear_goal()
-        self.explorers[1].change_frame(transform)
-        self.state = TeamState.COORDINATED_EXPLORATION
-        self._received = [maps(1), maps(0)]
-        self._fuse(maps, shared=True)
+        for robot in range(self.n_robots):
+            self._release(robot)
+        for k in range(1, self.n_robots):
+            self.frames[k] = transforms[k - 1].copy()
+            self.verified[k] = transforms[k - 1].copy()
+            self.roots[k] = 0
+            self.step_joined[k] = self.step
+            self._verified_at[k] = self._poses[k][:2].copy()
+            self._change_frame(k, self.frames[k])
+        self._last_refine_step = self.step
+        self._rest()
+        self._exchange_and_fuse(everyone=True)
 
     def _reject(self, rendezvous: _Rendezvous, maps: MapSource, why: str) -> None:
         self._decide(f"hypothesis #{rendezvous.index} rejected: {why}")
         self.rejected.append(rendezvous.hypothesis)
         self.rendezvous = None
-        for explorer in self.explorers:
-            explorer.clear_goal()
+        self._release_pair()
         self._start_rendezvous(rendezvous.index + 1, maps)
 
     def _give_up(self) -> None:
         self._decide("all hypotheses rejected: independent exploration until the maps grow")
-        self.hypotheses = []
-        self.rendezvous = None
-        self.state = TeamState.NO_INTERACTION
+        self._rest()
 
     # --- 4: coordinated exploration -------------------------------------------------------
 
-    def _keep_merged_map(self, maps: MapSource, link: bool) -> None:
-        assert self.transform is not None
+    def _exchange_and_fuse(self, *, everyone: bool) -> None:
+        """At a join: the robots of the common frame that can talk (``everyone``: all of
+        them) hold each other's current maps, and their merged views are made now."""
+        maps = self._maps
+        members = self.members
+        for i in members:
+            for j in members:
+                if i != j and (everyone or self._reach[i, j] or {i, j} == set(self.pair)):
+                    self._received[(i, j)] = maps(j)
+        shared = everyone or bool(self._reach[np.ix_(members, members)].all())
+        self._fuse(maps, shared=shared)
+
+    def _keep_merged_map(self, maps: MapSource) -> None:
+        """Every ``merged_map_every`` steps: the maps exchanged between the robots of the
+        common frame that can talk (directly or through teammates), the views refused."""
         if self.step - self._last_merge_step < self.config.merged_map_every:
             return
-        if link:
-            self._received = [maps(1), maps(0)]
-            if (
-                self.config.refine_every
-                and self.step - self._last_refine_step >= self.config.refine_every
-            ):
+        members = self.members
+        for i in members:
+            for j in members:
+                if i != j and self._reach[i, j]:
+                    self._received[(i, j)] = maps(j)
+        if (
+            self.config.refine_every
+            and self.step - self._last_refine_step >= self.config.refine_every
+        ):
+            for k in members[1:]:
+                verified = self.verified[k]
+                if not self._reach[0, k] or verified is None:
+                    continue
                 refined, _, _ = refine_transform(
-                    maps(0), maps(1), self.transform, self.config.merge, rng=self.rng
+                    maps(0), maps(k), self.frames[k], self.config.merge, rng=self.rng
                 )
-                if self._within_verified(refined):
-                    self.explorers[1].change_frame(compose(refined, inverse(self.transform)))
-                    self.transform = refined
-                self._last_refine_step = self.step
-        self._fuse(maps, shared=link)
+                if self._within_verified(refined, verified, self._verified_at[k]):
+                    self._change_frame(k, compose(refined, inverse(self.frames[k])))
+                    self.frames[k] = refined
+            self._last_refine_step = self.step
+        self._fuse(maps, shared=bool(self._reach[np.ix_(members, members)].all()))
 
     def _fuse(self, maps: MapSource, *, shared: bool) -> None:
-        """Refresh both robots' views; ``shared``: each has the other's current map (the
-        link is up), so the two views are one fusion."""
-        assert self.transform is not None
-        own = [maps(0), maps(1)]
-        views: list[GridMap] = []
-        for i in range(2 if not shared else 1):
-            other = self._received[i]
-            assert other is not None
-            m0, m1 = (own[0], other) if i == 0 else (other, own[1])
-            if not math.isclose(m1.resolution, m0.resolution):
-                m1 = resample_map(m1, m0.resolution)
-            views.append(fuse_maps(m0, m1, self.transform))
-        self.views = [views[0], views[-1]]
+        """Refresh the views of the robots of the common frame: each robot's own map,
+        current, fused with the others' as it holds them, in robot 0's frame. ``shared``:
+        all of them hold each other's current maps, so the views are one fusion."""
+        members = self.members
+        owners = members[:1] if shared else members
+        views: dict[int, GridMap] = {}
+        for i in owners:
+
+            def held(j: int, i: int = i) -> GridMap | None:
+                return maps(j) if j == i else self._received.get((i, j))
+
+            # Robot 0's map as held, the others' fused in; a robot that never received
+            # robot 0's map starts from the first it holds, brought into the frame.
+            view = held(0)
+            resolution = maps(i).resolution
+            for j in members[1:]:
+                other = held(j)
+                if other is None:
+                    continue
+                if not math.isclose(other.resolution, resolution):
+                    other = resample_map(other, resolution)
+                if view is None:
+                    view = warp_map(other, self.frames[j])
+                else:
+                    view = fuse_maps(view, other, self.frames[j])
+            assert view is not None  # robot i holds its own map
+            views[i] = view
+        self.views = [
+            (views[owners[0]] if shared else views[i]) if i in members else None
+            for i in range(self.n_robots)
+        ]
         self._last_merge_step = self.step
 
-    def _act_coordinated(self, observations: list[dict[str, Any]]) -> list[NDArray[np.float32]]:
-        assert self.transform is not None and self.merged_map is not None
-        poses0 = [
-            np.asarray(observations[0]["pose"], dtype=np.float64),
-            compose(self.transform, np.asarray(observations[1]["pose"], dtype=np.float64)),
+    def _act_coordinated(
+        self, observations: list[dict[str, Any]], maps: MapSource
+    ) -> list[NDArray[np.float32]]:
+        members = self.members
+        poses = [
+            pose if self.roots[i] != 0 or i == 0 else compose(self.frames[i], pose)
+            for i, pose in enumerate(self._poses)
         ]
+        self._assign_frontiers(members, poses)
         actions = []
-        for i, explorer in enumerate(self.explorers):
-            # In turn, so that robot 1 sees the target robot 0 picks on this very step;
-            # a teammate's pose and target are known only as last received over the link.
-            other = 1 - i
-            if self._link:
-                target = self.explorers[other].target
-                self._shared[other] = (poses0[other][:2].copy(), target)
-            position, target = self._shared[other]
-            explorer.set_teammates(np.empty((0, 2)) if position is None else position[None])
-            explorer.set_teammate_targets(np.empty((0, 2)) if target is None else target[None])
-            mine = explorer.target
+        for i, policy in enumerate(self.policies):
+            if self.roots[i] != 0:
+                actions.append(self.act_alone(i, observations[i], maps(i)))
+                continue
+            # In turn, so that a robot sees the targets the robots before it pick on this
+            # very step; a teammate's pose and target are known only as last received.
+            for j in members:
+                if j != i and self._reach[i, j]:
+                    self._shared[(i, j)] = (poses[j][:2].copy(), self._target_of(j))
+            known = [(j, *self._shared[(i, j)]) for j in members if (i, j) in self._shared]
+            mine = self._target_of(i)
+            replan = getattr(policy, "request_replan", None)
+            radius = getattr(policy, "shared_target_radius", self.config.explorer.separation / 4)
             if (
-                i == 1
-                and target is not None
+                replan is not None
                 and mine is not None
-                and np.hypot(*(mine - target)) < explorer.shared_target_radius
+                and any(
+                    j < i and target is not None and np.hypot(*(mine - target)) < radius
+                    for j, _, target in known
+                )
             ):
-                explorer.request_replan()  # both heading for one frontier: robot 1 yields
+                replan()  # two robots heading for one frontier: the later yields
             view = self.views[i]
             assert view is not None
-            actions.append(explorer.act(observations[i], view, pose_in_map=poses0[i]))
+            if self._on_goal[i]:
+                actions.append(self.explorers[i].act(observations[i], view, pose_in_map=poses[i]))
+                continue
+            context = PolicyContext(
+                robot=i,
+                step=self.step,
+                map=view,
+                pose=poses[i],
+                own_map=maps(i),
+                in_common_frame=True,
+                teammates=_points([position for _, position, _ in known]),
+                teammate_targets=_points([t for _, _, t in known if t is not None]),
+                goal=self._assigned[i],
+                common_from_own=self.frames[i].copy(),
+            )
+            actions.append(policy.act(observations[i], context))
         return actions
+
+    def _target_of(self, robot: int) -> FloatArray | None:
+        """Where ``robot`` heads in the common frame: its policy's ``target`` when it has
+        one, else the frontier the team assigned it."""
+        policy = self.policies[robot]
+        if hasattr(policy, "target"):
+            target = policy.target
+            return None if target is None else np.asarray(target, dtype=np.float64)[:2]
+        return self._assigned[robot]
+
+    def _assign_frontiers(self, members: list[int], poses: list[FloatArray]) -> None:
+        """Every ``replan_interval`` steps, the frontiers of the merged map split between
+        the robots of the common frame (:func:`~agents.explorer.team_frontier_goals`), for
+        the policies without a ``target`` of their own (their context's ``goal``)."""
+        chooses = [hasattr(self.policies[i], "target") for i in members]
+        if all(chooses):
+            return
+        if self.step - self._last_assignment < self.config.explorer.replan_interval:
+            return
+        self._last_assignment = self.step
+        assert self.merged_map is not None
+        positions = np.array([poses[i] for i in members])
+        goals, _ = team_frontier_goals(self.merged_map, positions, self.config.explorer)
+        for i, own_choice, goal in zip(members, chooses, goals, strict=True):
+            self._assigned[i] = None if own_choice or not np.all(np.isfinite(goal)) else goal
+
+
+def _row(robot: int, other: int) -> int:
+    """The row of ``other`` in ``robot``'s ``peer`` and ``comm`` observations (index
+    order, itself skipped)."""
+    return other if other < robot else other - 1
+
+
+def _reachable(links: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """Which robots can exchange data, directly or through teammates (the transitive
+    closure of ``links``, (N, N) bool; each robot reaches itself)."""
+    reach = links | np.eye(len(links), dtype=bool)
+    for k in range(len(links)):
+        reach = reach | (reach[:, k : k + 1] & reach[k : k + 1, :])
+    return reach
+
+
+def _points(points: Any) -> FloatArray:
+    """``points`` as a (K, 2) float array (None: empty)."""
+    if points is None:
+        return np.empty((0, 2))
+    return np.asarray(points, dtype=np.float64).reshape(-1, 2)
+
+
+def _no_map(robot: int) -> GridMap:
+    raise RuntimeError("the team has not acted yet: no maps")

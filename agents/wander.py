@@ -1,7 +1,10 @@
 """A reactive wandering policy: drive forward, steer away from obstacles, meander.
 
 It reads only the robot's own lidar scan (never ground truth), so it is a fair baseline
-and a simple driver for data collection. Deterministic given its ``rng``.
+and a simple driver for data collection. Deterministic given its ``rng``. It implements the
+exploration-policy protocol (:class:`agents.policy.ExplorationPolicy`; it ignores the
+context) and :func:`wander_policy` is its factory: ``mrslam run --policy
+agents.wander:wander_policy``.
 """
 
 from __future__ import annotations
@@ -13,11 +16,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from agents.policy import PolicyContext
 from agents.robot import DEFAULT_ENV, EnvFigures, build_for_env, check_against_env
 from mrslam_env.config import EnvConfig
 from mrslam_env.validation import check_fields, require
 
-__all__ = ["WanderConfig", "WanderPolicy"]
+__all__ = ["WanderConfig", "WanderPolicy", "wander_policy"]
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -91,6 +95,10 @@ class WanderPolicy:
         self._front = np.abs(self.angles) <= self.config.front_half_angle
         self._left = (self.angles > self.config.front_half_angle) & (self.angles < 2.0)
         self._right = (self.angles < -self.config.front_half_angle) & (self.angles > -2.0)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the meander and the escape direction (a new episode)."""
         self._random_turn = 0.0
         self._escape_direction = 0.0
 
@@ -105,10 +113,18 @@ class WanderPolicy:
         config.check_env(env)
         return cls(env.lidar.n_beams, rng, config)
 
-    def act(self, scan: NDArray[np.floating]) -> NDArray[np.float32]:
-        """One action for one scan (N,) of ranges in metres."""
+    def act(
+        self,
+        observation: dict[str, Any] | NDArray[np.floating],
+        context: PolicyContext | None = None,
+    ) -> NDArray[np.float32]:
+        """One action for one observation (its ``scan``) or for one scan (N,) of ranges in
+        metres; ``context`` is not needed (the protocol form)."""
         config = self.config
-        scan = np.asarray(scan, dtype=np.float64)
+        scan = np.asarray(
+            observation["scan"] if isinstance(observation, dict) else observation,
+            dtype=np.float64,
+        )
         # Scan points in the robot frame: x ahead, y to the left.
         x = scan * np.cos(self.angles)
         y = scan * np.sin(self.angles)
@@ -140,3 +156,9 @@ class WanderPolicy:
             return np.array([speed, turn], dtype=np.float32)
         turn = np.clip(0.3 * away + self._random_turn, -1.0, 1.0)
         return np.array([config.cruise_speed, turn], dtype=np.float32)
+
+
+def wander_policy(env: EnvConfig, rng: np.random.Generator) -> WanderPolicy:
+    """The exploration-policy factory (:data:`agents.policy.PolicyFactory`) of the wander
+    policy: ``mrslam run --policy agents.wander:wander_policy``."""
+    return WanderPolicy.for_env(env, rng)

@@ -90,6 +90,13 @@ def _build_parser() -> argparse.ArgumentParser:
         help="the robots never interact (the no-coordination baseline)",
     )
     run.add_argument("--no-comm", action="store_true", help="the radio link never comes up")
+    run.add_argument(
+        "--policy",
+        metavar="MODULE:FACTORY",
+        help="the robots' exploration policy: factory(env, rng) in an importable module or a "
+        ".py file (default: the frontier explorer; see agents/policy.py)",
+    )
+    run.add_argument("--robots", type=int, default=2, help="team size, 2 to 8 (default 2)")
     run.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
 
     merge = commands.add_parser(
@@ -158,6 +165,20 @@ def _build_parser() -> argparse.ArgumentParser:
         default="team,independent,oracle,single",
         help="comma-separated runs per scenario and seed, of team, independent, oracle, "
         "single (default: all four)",
+    )
+    explore.add_argument(
+        "--policy",
+        metavar="MODULE:FACTORY",
+        help="also run this exploration policy (factory(env, rng)) on the same seeds; its "
+        "rows appear beside the frontier explorer's",
+    )
+    explore.add_argument(
+        "--robots",
+        type=int,
+        nargs="+",
+        default=[2],
+        metavar="N",
+        help="team sizes, 2 to 8 (default 2); one row per scenario and size",
     )
     explore.add_argument("--json", action="store_true")
     soak = kinds.add_parser(
@@ -264,6 +285,8 @@ def _run(args: argparse.Namespace) -> int:
         record=not args.no_record,
         interaction=not args.independent,
         comm=not args.no_comm,
+        policy=args.policy,
+        robots=args.robots,
         progress=not args.json,
         overwrite=args.overwrite,
     )
@@ -280,6 +303,8 @@ def _run(args: argparse.Namespace) -> int:
             )
         else:
             merged = f"no merge ({merge['hypotheses_tested']} hypotheses tested)"
+        if "joined" in merge:
+            merged += f"; {merge['joined']} of {report['robots'] - 1} robots joined robot_0's frame"
         coverage = report["coverage"]["merged"]
         print(
             f"{report['scenario']}: {report['steps']} steps ({report['sim_time']:.0f} s simulated) "
@@ -538,6 +563,8 @@ def _cmd_bench_explore(args: argparse.Namespace) -> int:
         modes=modes,
         jobs=args.jobs,
         progress=None if args.json else lambda text: print(text, file=sys.stderr),
+        policy=args.policy,
+        robots=args.robots,
     )
     if args.json:
         print(json.dumps({"summary": rows, "runs": runs}, indent=2))

@@ -8,6 +8,10 @@ accepted one and lets them explore the merged map together. The run stops when t
 robots' maps together cover ``target_coverage`` of the free area (evaluated against the
 ground truth, which the robots never see) or after ``max_steps``.
 
+Each robot explores with an exploration policy (``policy``, a ``module:factory`` spec,
+:mod:`agents.policy`; the frontier explorer by default); the team around it is the same
+whatever the policy, and the report names the policy that ran.
+
 Outputs in ``<out>/<name>/``: ``recording.rrd``, ``report.json``, ``robot_0.yaml``/``.pgm``
 and ``robot_1.yaml``/``.pgm`` (each robot's map in its own frame), ``merged.yaml``/``.pgm``
 (in robot 0's frame, when merged) and ``figure.png`` (ground truth, m1, m2, merge with the
@@ -42,8 +46,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from agents.policy import build_policy, load_policy_factory, policy_label
 from agents.rendezvous import judge_sighting, sighting_pose
-from agents.team import TeamConfig, TeamCoordinator, TeamState
+from agents.team import TeamConfig, TeamCoordinator
 from mrslam_env.atomic import atomic_path, write_text_atomic
 from mrslam_env.config import CommConfig, EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
@@ -150,6 +155,11 @@ class RunConfig:
     single: bool = False
     """True: robot 0 explores alone; robot 1 stays where it started and its map does not
     count towards coverage (the one-robot baseline; ``t90`` is for the whole floor)."""
+    robots: int = 2
+    """Team size, 2 to 8 (starts beyond the world's own are chosen by the simulator)."""
+    policy: str | None = None
+    """The robots' exploration policy as ``module:factory`` (or ``path/file.py:factory``,
+    :func:`agents.policy.load_policy_factory`); None: the frontier explorer."""
     target_coverage: float = 0.95
     """Stop once the robots' maps together cover this fraction of the free area."""
     coverage_every: int = 20
@@ -169,6 +179,9 @@ class RunConfig:
             raise ValueError(f"target_coverage must be in (0, 1], got {self.target_coverage}")
         if self.oracle and (self.single or not self.interaction):
             raise ValueError("oracle needs interaction and two robots (not single)")
+        robots = self.robots
+        if not isinstance(robots, int) or isinstance(robots, bool) or not 2 <= robots <= 8:
+            raise ValueError(f"robots must be an integer from 2 to 8, got {robots!r}")
 
 
 def resolve_world(scenario: str, map_path: Path | None, seed: int = 0) -> WorldSpec:
@@ -205,9 +218,21 @@ def build_team(config: RunConfig, env_config: EnvConfig) -> TeamCoordinator:
         interaction=config.interaction and not config.single,
         keep_merges=config.record,
     )
+    factory = None if config.policy is None else load_policy_factory(config.policy)
     return TeamCoordinator.for_env(
-        env_config, rng=np.random.default_rng(config.seed), config=team_config
+        env_config,
+        rng=np.random.default_rng(config.seed),
+        config=team_config,
+        n_robots=config.robots,
+        policy_factory=factory,
     )
+
+
+def check_policy(spec: str | None, env_config: EnvConfig) -> None:
+    """Refuse a bad policy spec before any work: ``ValueError`` with one line when the
+    module or factory cannot be loaded or what it builds is no exploration policy."""
+    if spec is not None:
+        build_policy(load_policy_factory(spec), env_config, np.random.default_rng(0), spec)
 
 
 @contextmanager
@@ -263,20 +288,25 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                 f"--overwrite would delete the input map {config.map_path} (it is in the run "
                 f"folder {Path(config.out) / name}); copy it elsewhere or choose another --name"
             )
-    run_dir = prepare_run_dir(Path(config.out), name, overwrite=config.overwrite)
     comm = CommConfig() if config.comm else CommConfig(comm_range=1e-9)
     env_config = EnvConfig(max_cycles=config.max_steps, comm=comm)
-    env = MultiRobotSlamEnv(scenario=world, seed=config.seed, config=env_config)
+    check_policy(config.policy, env_config)
+    run_dir = prepare_run_dir(Path(config.out), name, overwrite=config.overwrite)
+    env = MultiRobotSlamEnv(
+        scenario=world, n_robots=config.robots, seed=config.seed, config=env_config
+    )
     observations, infos = env.reset()
     agents = list(env.possible_agents)
     team = build_team(config, env.config)
     maps = MapCache(env)
     # Robot i's map frame is its start pose: how its SLAM and the merge are judged.
     world_from_maps = [env.simulator.starts[i].copy() for i in range(len(agents))]
-    true_transform = compose(inverse(world_from_maps[0]), world_from_maps[1])
+    # The true map0_from_map_i: what the team's transforms are judged against.
+    true_transforms = [compose(inverse(world_from_maps[0]), w) for w in world_from_maps]
+    true_transform = true_transforms[1]
     evaluator = CoverageEvaluator(world, env.simulator.starts)
     if config.oracle:
-        team.start_coordinated(true_transform, maps)
+        team.start_coordinated(np.array(true_transforms[1:]), maps)
     # The robots whose maps count towards coverage (single: robot 0 alone).
     counted = [0] if config.single else list(range(len(agents)))
     idle = np.zeros(2, dtype=np.float32)
@@ -302,7 +332,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
 
         logged_scans = [-1] * len(agents)
         drawn = _DrawnRendezvous()
-        shown_transform: FloatArray | None = None
+        shown_transforms: list[FloatArray | None] = [None] * len(agents)
         collisions = dict.fromkeys(agents, 0)
         state = team.state
         coverage_curve: list[tuple[int, float]] = []
@@ -314,7 +344,8 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
             with _progress(config.max_steps, config.progress) as bar:
                 while env.agents:
                     if config.single:
-                        actions = [team.explorers[0].act(observations[agents[0]], maps(0)), idle]
+                        actions = [team.act_alone(0, observations[agents[0]], maps(0))]
+                        actions += [idle] * (len(agents) - 1)
                     else:
                         actions = team.act([observations[a] for a in agents], maps)
                     observations, _rewards, _terms, _truncs, infos = env.step(
@@ -338,11 +369,14 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                                 attempt.result,
                                 attempt.map0,
                                 attempt.map1,
-                                label=f"robot_0's and robot_1's maps at step {attempt.step}",
+                                label=f"robot_{attempt.robots[0]}'s and "
+                                f"robot_{attempt.robots[1]}'s maps at step {attempt.step}",
                             )
-                        if team.transform is not None and team.transform is not shown_transform:
-                            recorder.set_team_transform(1, team.transform)
-                            shown_transform = team.transform
+                        for k in range(1, len(agents)):
+                            frame = team.frames[k] if team.roots[k] == 0 else None
+                            if frame is not None and frame is not shown_transforms[k]:
+                                recorder.set_team_transform(k, frame)
+                                shown_transforms[k] = frame
                         if team.state is not state:
                             recorder.log_text("team/state", str(team.state))
                         _record_step(
@@ -373,7 +407,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                             t90 = steps * env_config.dt
                         if covered >= config.target_coverage:
                             break
-                        if all(team.explorers[i].done for i in counted):
+                        if all(team.done(i) for i in counted):
                             break
         except KeyboardInterrupt as stop:  # Ctrl-C or a signal: keep what was done
             interrupted = getattr(stop, "signal_name", "SIGINT")
@@ -389,8 +423,11 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
             }
             truth = ground_truth_map(world, own_maps[0].resolution)
             merged = preliminary = None
+            # The robots in robot 0's frame (a verified transform reaches them), with
+            # their transforms as refined and as verified.
+            joined = [k for k in range(1, len(agents)) if team.roots[k] == 0]
             merge_report: dict[str, Any] = {
-                "verified": team.transform is not None,
+                "verified": bool(joined),
                 "transform": None,
                 "true_transform": _pose_dict(true_transform),
                 "translation_error": None,
@@ -398,27 +435,40 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                 "hypotheses_tested": team.hypotheses_tested,
                 "step_verified": team.step_verified,
             }
-            if team.transform is not None:
-                other = own_maps[1]
-                if not math.isclose(other.resolution, own_maps[0].resolution):
-                    other = resample_map(other, own_maps[0].resolution)
-                merged = fuse_maps(own_maps[0], other, team.transform)
-                assert team.preliminary_transform is not None
-                preliminary = fuse_maps(own_maps[0], other, team.preliminary_transform)
-                translation_error, rotation_error = relative_transform_error(
-                    team.transform, true_transform
-                )
+            if len(agents) > 2:
+                merge_report["joined"] = len(joined)
+                merge_report["robots"] = {
+                    agents[k]: _robot_merge(team, k, true_transforms[k])
+                    for k in range(1, len(agents))
+                }
+            if joined:
+                merged = _fuse_all(own_maps, {k: team.frames[k] for k in joined})
+                verified_transforms = {k: team.verified[k] for k in joined}
+                preliminary = _fuse_all(own_maps, verified_transforms)
+                errors = [
+                    relative_transform_error(team.frames[k], true_transforms[k]) for k in joined
+                ]
+                translation_error = max(t for t, _ in errors)
+                rotation_error = max(r for _, r in errors)
                 merge_report.update(
-                    transform=_pose_dict(team.transform),
-                    preliminary_transform=_pose_dict(team.preliminary_transform),
                     translation_error=round(translation_error, 4),
                     rotation_error=round(math.degrees(rotation_error), 4),
                 )
+                if team.transform is not None:
+                    assert team.preliminary_transform is not None
+                    merge_report.update(
+                        transform=_pose_dict(team.transform),
+                        preliminary_transform=_pose_dict(team.preliminary_transform),
+                    )
                 save_map(run_dir / "merged.yaml", merged)
                 outputs["merged_map"] = str(run_dir / "merged.yaml")
+            apart = [i for i in counted if i != 0 and i not in joined]
             coverage = {
                 "merged": round(
-                    evaluator.coverage([merged], [world_from_maps[0]])
+                    evaluator.coverage(
+                        [merged, *(own_maps[i] for i in apart)],
+                        [world_from_maps[0], *(world_from_maps[i] for i in apart)],
+                    )
                     if merged is not None
                     else evaluator.coverage(
                         [own_maps[i] for i in counted], [world_from_maps[i] for i in counted]
@@ -432,7 +482,15 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
             }
             if config.figure:
                 with atomic_path(run_dir / "figure.png") as figure:
-                    summary_figure(figure, truth, own_maps[0], own_maps[1], preliminary, merged)
+                    summary_figure(
+                        figure,
+                        truth,
+                        own_maps[0],
+                        own_maps[1],
+                        preliminary,
+                        merged,
+                        more_maps=own_maps[2:],
+                    )
                 outputs["figure"] = str(run_dir / "figure.png")
             report: dict[str, Any] = {
                 "complete": interrupted is None,
@@ -446,6 +504,9 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                 "comm": config.comm,
                 "oracle": config.oracle,
                 "single": config.single,
+                "robots": len(agents),
+                "policy": policy_label(config.policy),
+                "policy_spec": config.policy,
                 "merge": merge_report,
                 "coverage": coverage,
                 "t90": None if t90 is None else round(t90, 3),
@@ -509,7 +570,7 @@ def _record_step(
     agents = list(env.possible_agents)
     lidar = env.config.lidar
     due = recorder.map_due or not env.agents
-    coordinated = team.state is TeamState.COORDINATED_EXPLORATION and team.transform is not None
+    coordinated = len(team.members) > 1 and team.merged_map is not None
     for i, agent in enumerate(agents):
         radius = env.config.robot.radius
         recorder.log_true_pose(i, infos[agent]["true_pose"], radius=radius)
@@ -531,42 +592,47 @@ def _record_step(
             logged_scans[i] = slam.n_integrated
         # Plans and frontiers are in the frame of the map explored: robot 0's while
         # coordinating; bring them into the robot's own frame.
-        explorer = team.explorers[i]
-        own_from_plan = (
-            inverse(team.transform)
-            if coordinated and i == 1 and team.transform is not None
-            else None
-        )
-        for entity, points in (("plan", explorer.plan), ("frontiers", explorer.frontiers)):
+        own_from_plan = inverse(team.frames[i]) if i != 0 and team.coordinated(i) else None
+        for entity, points in (("plan", team.plan_of(i)), ("frontiers", team.frontiers_of(i))):
             if own_from_plan is not None and len(points):
                 points = transform_points(own_from_plan, points)
             if entity == "plan":
                 recorder.log_line(f"{agent}/plan", points, robot=i)
             else:
                 recorder.log_points(f"{agent}/frontiers", points, robot=i)
-    # A rendezvous can be settled within a few steps: log it every step while it lasts,
-    # all in robot 0's map frame (robot 1's plan and pose brought there by the hypothesis).
+    # A rendezvous can be settled within a few steps: log it every step while it lasts.
     rendezvous = team.rendezvous
     if rendezvous is not None:
+        # The pair meeting, side 0 and side 1, each in its group root's frame (robot 0's
+        # while robot 0 is one of them); side 1's plan and pose brought there by the
+        # hypothesis under test.
         hypothesis = rendezvous.hypothesis
-        plans = [team.explorers[0].plan, team.explorers[1].plan]
-        if len(plans[1]):
-            plans[1] = transform_points(hypothesis, plans[1])
-        poses = [
-            observations[agents[0]]["pose"],
-            compose(hypothesis, observations[agents[1]]["pose"]),
-        ]
-        # Robot 0's sightings of robot 1 since the rendezvous began, each judged against
-        # where the hypothesis puts robot 1 (as the team judges them).
-        peer = observations[agents[0]]["peer"][0]
+        pair = team.pair
+        plans: list[FloatArray] = [np.empty((0, 2))] * len(agents)
+        poses: list[FloatArray | None] = [None] * len(agents)
+        for side, robot in enumerate(pair):
+            to_root = team.explored_frame(robot)
+            if side == 1:
+                to_root = hypothesis if to_root is None else compose(hypothesis, to_root)
+            plan = team.plan_of(robot)
+            if to_root is not None and len(plan):
+                plan = transform_points(to_root, plan)
+            plans[robot] = plan
+            pose = team.pose_in_root(robot, observations[agents[robot]]["pose"])
+            poses[robot] = pose if side == 0 else compose(hypothesis, pose)
+        # Side 0's sightings of side 1 since the rendezvous began, each judged against
+        # where the hypothesis puts side 1 (as the team judges them).
+        peer = observations[agents[pair[0]]]["peer"][pair[1] - (pair[1] > pair[0])]
         if peer[0] > 0.5:
             seen = sighting_pose(peer[1], peer[2], peer[3])
-            predicted = compose(inverse(poses[0]), poses[1])
+            first, second = poses[pair[0]], poses[pair[1]]
+            assert first is not None and second is not None
+            predicted = compose(inverse(first), second)
             verdict = judge_sighting(seen, predicted, team.config.rendezvous).matches
-            drawn.sightings.append((compose(poses[0], seen)[:2], verdict))
+            drawn.sightings.append((compose(first, seen)[:2], verdict))
         recorder.log_rendezvous(
             rendezvous.meeting_point,
-            plans,
+            plans[: max(pair) + 1],
             poses=poses,
             sightings=np.array([s for s, _ in drawn.sightings]).reshape(-1, 2),
             sighting_matches=[m for _, m in drawn.sightings],
@@ -578,3 +644,35 @@ def _record_step(
         drawn.active, drawn.sightings = False, []
     if due and coordinated and team.merged_map is not None:
         recorder.log_grid("team/merged_map", team.merged_map)
+
+
+def _fuse_all(own_maps: list[GridMap], transforms: dict[int, FloatArray | None]) -> GridMap:
+    """Robot 0's map with robot k's fused in by ``transforms[k]`` (``map0_from_map_k``)."""
+    merged = own_maps[0]
+    for k, transform in transforms.items():
+        assert transform is not None
+        other = own_maps[k]
+        if not math.isclose(other.resolution, merged.resolution):
+            other = resample_map(other, merged.resolution)
+        merged = fuse_maps(merged, other, transform)
+    return merged
+
+
+def _robot_merge(team: TeamCoordinator, robot: int, truth: FloatArray) -> dict[str, Any]:
+    """One robot's entry in the report's ``merge.robots`` (teams of more than two)."""
+    transform = team.common_transform(robot)
+    entry: dict[str, Any] = {
+        "joined": transform is not None,
+        "step_joined": team.step_joined[robot],
+        "transform": None if transform is None else _pose_dict(transform),
+        "true_transform": _pose_dict(truth),
+        "translation_error": None,
+        "rotation_error": None,
+    }
+    if transform is not None:
+        translation_error, rotation_error = relative_transform_error(transform, truth)
+        entry.update(
+            translation_error=round(translation_error, 4),
+            rotation_error=round(math.degrees(rotation_error), 4),
+        )
+    return entry

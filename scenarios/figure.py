@@ -4,11 +4,13 @@ Five panels side by side, each a map drawn in ROS grey levels (free white, occup
 black, unknown grey): the ground truth, robot 0's map m1, robot 1's map m2, the merge
 with the preliminary (verified, unrefined) estimate, and the merge after refinement.
 Maps are drawn at one scale (one pixel per cell of the finest map) and each panel is
-labelled. Panels without content (no merge) say so.
+labelled. Panels without content (no merge) say so. A team of more than two robots adds
+one panel per further robot's map after m2.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -51,14 +53,18 @@ def summary_figure(
     map1: GridMap,
     preliminary: GridMap | None,
     refined: GridMap | None,
+    *,
+    more_maps: Sequence[GridMap] = (),
 ) -> Path:
-    """Write the five-panel PNG; maps of other resolutions are scaled to the finest."""
-    maps = [ground_truth, map0, map1, preliminary, refined]
+    """Write the five-panel PNG (one more panel per map of ``more_maps``, robot 2's and
+    on, after m2); maps of other resolutions are scaled to the finest."""
+    maps = [ground_truth, map0, map1, *more_maps, preliminary, refined]
     finest = min(m.resolution for m in maps if m is not None)
     labels = [
         "ground truth",
         "m1 (robot_0)",
         "m2 (robot_1)",
+        *(f"m{k + 3} (robot_{k + 2})" for k in range(len(more_maps))),
         "merge, preliminary estimate",
         "merge, after refinement",
     ]

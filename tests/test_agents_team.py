@@ -38,7 +38,7 @@ def verify(hypothesis: np.ndarray, steps: int = 600) -> tuple[TeamCoordinator, l
     # The hypothesis under test is injected as if the merge had proposed it.
     team.hypotheses = [hypothesis]
     team._last_poses = [observations[a]["pose"] for a in agents]
-    team._retry_area = np.inf  # no new merge attempt during the test
+    team._retry_area = {(0, 1): np.inf}  # no new merge attempt during the test
     team._start_rendezvous(0, maps)
     assert team.state is TeamState.HYPOTHESIS_VERIFICATION
     decisions: list[str] = []
@@ -109,7 +109,7 @@ def test_a_hypothesis_that_puts_the_robots_in_sight_is_settled_where_they_stand(
         agents = env.possible_agents
         maps = MapCache(env)
         team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0))
-        team._retry_area = np.inf  # no merge of its own: the hypothesis is injected
+        team._retry_area = {(0, 1): np.inf}  # no merge of its own: the hypothesis is injected
         team.act([observations[a] for a in agents], maps)  # sees the link and the poses
         team.pop_decisions()
         team.hypotheses = [hypothesis]
@@ -139,17 +139,20 @@ def test_a_hypothesis_that_puts_the_robots_in_sight_is_settled_where_they_stand(
 def test_refinement_never_leaves_what_the_rendezvous_verified() -> None:
     team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0))
     verified = np.array([2.0, 1.0, 0.5])
-    team.preliminary_transform = verified
-    team._verified_at = np.array([3.0, -1.0])
+    at = np.array([3.0, -1.0])
+
+    def within(transform: np.ndarray) -> bool:
+        return team._within_verified(transform, verified, at)
+
     tolerance = team.config.rendezvous.position_tolerance
-    assert team._within_verified(compose(verified, [0.1, -0.1, 0.01]))
+    assert within(compose(verified, [0.1, -0.1, 0.01]))
     # Turned about the meeting point by less than the heading tolerance: still verified.
     about_meeting = compose(
         compose(verified, [3.0, -1.0, 0.0]), compose([0.0, 0.0, 0.2], [-3.0, 1.0, 0.0])
     )
-    assert team._within_verified(about_meeting)
-    assert not team._within_verified(compose(verified, [tolerance + 0.1, 0.0, 0.0]))
-    assert not team._within_verified(compose(verified, [0.0, 0.0, np.pi]))  # a symmetry
+    assert within(about_meeting)
+    assert not within(compose(verified, [tolerance + 0.1, 0.0, 0.0]))
+    assert not within(compose(verified, [0.0, 0.0, np.pi]))  # a symmetry
 
 
 def test_plain_sight_needs_known_free_space_all_the_way() -> None:
@@ -193,26 +196,29 @@ def test_with_the_link_down_each_robot_sees_all_of_its_own_mapping() -> None:
         return int(view.cells[row, col])
 
     own = [known(0.0, 3.0), known(6.0, 9.0)]  # one frame: the transform is the identity
-    team.state, team.transform = TeamState.COORDINATED_EXPLORATION, np.zeros(3)
-    team._received = [own[1], own[0]]
+    team.state, team.roots = TeamState.COORDINATED_EXPLORATION, [0, 0]
+    team._received = {(0, 1): own[1], (1, 0): own[0]}
     team._fuse(lambda i: own[i], shared=True)
     assert team.views[0] is team.views[1] is team.merged_map
     # The link goes down and both robots map on: each view has its own robot's new cells
     # and only the other's as last received.
+    up, down = np.ones((2, 2), dtype=bool), np.eye(2, dtype=bool)
     own[:] = [known(0.0, 4.0), known(5.0, 9.0)]
     team.step += 5
-    team._keep_merged_map(lambda i: own[i], link=False)
+    team._reach = down
+    team._keep_merged_map(lambda i: own[i])
     view0, view1 = team.views
     assert view0 is not None and view1 is not None and view0 is team.merged_map
     assert (state(view0, 3.5), state(view0, 5.5)) == (FREE, UNKNOWN)
     assert (state(view1, 3.5), state(view1, 5.5)) == (UNKNOWN, FREE)
     # Not yet due: nothing is refreshed.
     team.step += 1
-    team._keep_merged_map(lambda i: own[i], link=True)
+    team._reach = up
+    team._keep_merged_map(lambda i: own[i])
     assert team.views == [view0, view1]
     # The link is back: one view with everything.
     team.step += 4
-    team._keep_merged_map(lambda i: own[i], link=True)
+    team._keep_merged_map(lambda i: own[i])
     assert team.views[0] is team.views[1]
     assert (state(team.views[0], 3.5), state(team.views[0], 5.5)) == (FREE, FREE)
 

@@ -36,6 +36,19 @@ Reported per scenario:
 
 With several scenarios a last row, ``all``, summarises every run.
 
+**A policy of one's own.** ``policy`` (``mrslam bench explore --policy module:factory``,
+:mod:`agents.policy`) runs every scenario, seed and mode a second time with that
+exploration policy in place of the frontier explorer; the summary then has one row per
+scenario and policy (a ``policy`` column), the frontier baseline's beside the policy's,
+on the same seeds and starts.
+
+**Team sizes.** ``robots`` (``--robots 2 3 4``) runs every scenario, seed and mode with
+each team size; the summary then has one row per scenario and size (a ``robots`` column)
+and, per row, ``joined``: the robots (besides robot 0) that a verified transform brought
+into robot 0's frame, over all team runs, and the worst error of those transforms in
+``translation_error`` / ``rotation_error``. The worlds' own starts are used for the first
+two robots; the simulator chooses the others' (seeded).
+
 Coverage is judged against the ground truth (evaluation only); runs stop as ``mrslam
 run`` does, at 95 % (or the step limit), so that the merge figures are those of the main
 job.
@@ -53,7 +66,9 @@ from typing import Any
 
 import numpy as np
 
-from scenarios.experiment import RunConfig, run_experiment
+from agents.policy import policy_label
+from mrslam_env.config import EnvConfig
+from scenarios.experiment import RunConfig, check_policy, run_experiment
 
 __all__ = [
     "DEFAULT_SCENARIOS",
@@ -96,14 +111,24 @@ def _mode_config(mode: str) -> dict[str, bool]:
     }
 
 
-def _run(scenario: str, seed: int, max_steps: int, mode: str, out: Path) -> dict[str, Any]:
+def _run(
+    scenario: str,
+    seed: int,
+    max_steps: int,
+    mode: str,
+    policy: str | None,
+    robots: int,
+    out: Path,
+) -> dict[str, Any]:
     flags = _mode_config(mode)
     config = RunConfig(
         scenario=scenario,
         seed=seed,
         max_steps=max_steps,
         out=out,
-        name=f"{scenario}-{seed}-{mode}",
+        name=f"{scenario}-{seed}-{mode}-{robots}" + ("" if policy is None else "-policy"),
+        policy=policy,
+        robots=robots,
         record=False,
         figure=False,
         progress=False,
@@ -114,9 +139,9 @@ def _run(scenario: str, seed: int, max_steps: int, mode: str, out: Path) -> dict
     return run_experiment(config)
 
 
-def _task(args: tuple[str, int, int, str, str]) -> dict[str, Any]:
-    scenario, seed, max_steps, mode, folder = args
-    report = _run(scenario, seed, max_steps, mode, Path(folder))
+def _task(args: tuple[str, int, int, str, str | None, int, str]) -> dict[str, Any]:
+    scenario, seed, max_steps, mode, policy, robots, folder = args
+    report = _run(scenario, seed, max_steps, mode, policy, robots, Path(folder))
     merge = report["merge"]
     limit = max_steps * 0.1
     collisions = report["collision_steps"]
@@ -125,6 +150,9 @@ def _task(args: tuple[str, int, int, str, str]) -> dict[str, Any]:
         "scenario": scenario,
         "seed": seed,
         "mode": mode,
+        "policy": report["policy"],
+        "robots": robots,
+        "joined": merge.get("joined", int(merge["verified"])),
         "t90": report["t90"],
         "t90_or_limit": report["t90"] if report["t90"] is not None else limit,
         "verified": merge["verified"],
@@ -148,16 +176,26 @@ def run_explore_benchmark(
     modes: Sequence[str] = MODES,
     jobs: int = 1,
     progress: Callable[[str], None] | None = None,
+    policy: str | None = None,
+    robots: Sequence[int] = (2,),
 ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """Run the benchmark (``jobs`` runs at a time, in processes) in the given ``modes``
-    (of :data:`MODES`); returns (summary rows per scenario, per-run rows)."""
+    (of :data:`MODES`), with the frontier explorer and, when given, the exploration
+    ``policy`` (``module:factory``) too; returns (summary rows per scenario and policy,
+    per-run rows). ``robots``: the team sizes, one summary row per scenario and size."""
     for mode in modes:
         _mode_config(mode)
+    for size in robots:
+        RunConfig(robots=size)  # refuses a bad size before any run
+    check_policy(policy, EnvConfig())
+    policies = [None] if policy is None else [None, policy]
     with tempfile.TemporaryDirectory(prefix="mrslam-bench-explore-") as folder:
         tasks = [
-            (scenario, seed, max_steps, mode, folder)
+            (scenario, seed, max_steps, mode, spec, size, folder)
             for scenario in scenarios
+            for size in robots
             for seed in seeds
+            for spec in policies
             for mode in modes
         ]
         runs: list[dict[str, Any]] = []
@@ -165,12 +203,23 @@ def run_explore_benchmark(
             for row in pool.map(_task, tasks):
                 runs.append(row)
                 if progress is not None:
+                    label = "" if policy is None else f" ({row['policy']})"
+                    label += "" if list(robots) == [2] else f", {row['robots']} robots"
                     progress(
-                        f"{row['scenario']} seed {row['seed']} {row['mode']}: t90 {row['t90']}"
+                        f"{row['scenario']} seed {row['seed']} {row['mode']}{label}: "
+                        f"t90 {row['t90']}"
                     )
-    rows = [_summarise(scenario, runs) for scenario in scenarios]
+    labels = [policy_label(spec) for spec in policies]
+    rows = [
+        _summarise(scenario, runs, policy=label, robots=size)
+        for scenario in scenarios
+        for size in robots
+        for label in labels
+    ]
     if len(scenarios) > 1:
-        rows.append(_summarise(None, runs))
+        rows += [
+            _summarise(None, runs, policy=label, robots=size) for size in robots for label in labels
+        ]
     return rows, runs
 
 
@@ -186,9 +235,23 @@ def _spread(values: Sequence[float]) -> tuple[float, float, float] | None:
     )
 
 
-def _summarise(scenario: str | None, runs: list[dict[str, Any]]) -> dict[str, Any]:
-    """The summary row of one scenario, or of all runs (``scenario=None``, named "all")."""
-    mine = [r for r in runs if scenario is None or r["scenario"] == scenario]
+def _summarise(
+    scenario: str | None,
+    runs: list[dict[str, Any]],
+    *,
+    policy: str | None = None,
+    robots: int | None = None,
+) -> dict[str, Any]:
+    """The summary row of one scenario, or of all runs (``scenario=None``, named "all");
+    of the runs of one ``policy`` (its label) and team size ``robots`` when given, else
+    of all."""
+    mine = [
+        r
+        for r in runs
+        if (scenario is None or r["scenario"] == scenario)
+        and (policy is None or r.get("policy", "frontier") == policy)
+        and (robots is None or r.get("robots", 2) == robots)
+    ]
     by_mode = {mode: [r for r in mine if r["mode"] == mode] for mode in MODES}
     t90 = {
         mode: round(statistics.fmean(r["t90_or_limit"] for r in chosen), 1)
@@ -221,6 +284,8 @@ def _summarise(scenario: str | None, runs: list[dict[str, Any]]) -> dict[str, An
     rotation = _spread([r["rotation_error"] for r in verified])
     return {
         "scenario": "all" if scenario is None else scenario,
+        "policy": "frontier" if policy is None else policy,
+        "robots": 2 if robots is None else robots,
         "runs": len(team),
         "faster": faster,
         "t90": t90,
@@ -236,6 +301,8 @@ def _summarise(scenario: str | None, runs: list[dict[str, Any]]) -> dict[str, An
         "unfinished_coordinated": sum(r["t90"] is None for r in team),
         "unfinished_independent": sum(r["t90"] is None for r in solo),
         "verified": len(verified),
+        "joined": sum(r.get("joined", int(r["verified"])) for r in team),
+        "joinable": sum(r.get("robots", 2) - 1 for r in team),
         "wrong_accepted": len(wrong),
         "translation_error": translation,
         "rotation_error": rotation,
@@ -256,13 +323,22 @@ def _time(row: dict[str, Any], mode: str) -> str:
 
 def format_explore_table(rows: Sequence[dict[str, Any]]) -> str:
     """The summary as a markdown table. A t90 with "(n✗)" includes n runs that never
-    reached 90 % (counted at their time limit)."""
+    reached 90 % (counted at their time limit). Rows of more than one policy get a
+    ``policy`` column after the scenario."""
+    by_policy = len({row.get("policy", "frontier") for row in rows}) > 1
+    by_size = {row.get("robots", 2) for row in rows} != {2}
     lines = [
-        "| scenario | t90 team (s) | t90 independent (s) | t90 oracle (s) | t90 single (s) | "
+        "| scenario | "
+        + ("policy | " if by_policy else "")
+        + ("robots | joined | " if by_size else "")
+        + "t90 team (s) | t90 independent (s) | t90 oracle (s) | t90 single (s) | "
         "speed-up indep/team | share of oracle gain | faster | verified | wrong accepted | "
         "error m med / p90 / max | error ° med / p90 / max | "
         "collision steps team med / max (% steps) | hypotheses tested |",
-        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
+        "| --- | "
+        + ("--- | " if by_policy else "")
+        + ("---: | ---: | " if by_size else "")
+        + "---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
         "| ---: | ---: |",
     ]
     for row in rows:
@@ -280,8 +356,11 @@ def format_explore_table(rows: Sequence[dict[str, Any]]) -> str:
                 f"{team_collisions['median']:.0f} / {team_collisions['max']:.0f} "
                 f"({team_collisions['median_percent']:.1f} %)"
             )
+        policy = f" {row.get('policy', 'frontier')} |" if by_policy else ""
+        if by_size:
+            policy += f" {row['robots']} | {row['joined']}/{row['joinable']} |"
         lines.append(
-            f"| {row['scenario']} | {_time(row, 'team')} | {_time(row, 'independent')} | "
+            f"| {row['scenario']} |{policy} {_time(row, 'team')} | {_time(row, 'independent')} | "
             f"{_time(row, 'oracle')} | {_time(row, 'single')} | {speedup} | {share_text} | "
             f"{row['faster']}/{row['runs']} | {row['verified']}/{row['runs']} | "
             f"{row['wrong_accepted']} | {t_error} | {r_error} | {collisions} | "
