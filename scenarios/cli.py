@@ -180,6 +180,28 @@ def _build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="team sizes, 2 to 8 (default 2); one row per scenario and size",
     )
+    explore.add_argument(
+        "--ray",
+        nargs="?",
+        const="",
+        metavar="ADDRESS",
+        help="run the runs as Ray tasks: alone, on a local Ray instance of --jobs CPUs; with "
+        "an ADDRESS (e.g. auto), on that cluster (pip install 'mrslam[ray]')",
+    )
+    explore.add_argument(
+        "--out",
+        type=Path,
+        metavar="DIR",
+        help="keep every run's report (DIR/reports/*.json), the table (DIR/explore.md) and "
+        "summary.json in DIR (new or empty)",
+    )
+    explore.add_argument(
+        "--from",
+        dest="from_dir",
+        type=Path,
+        metavar="DIR",
+        help="run nothing: rebuild the table from the reports an --out DIR kept",
+    )
     explore.add_argument("--json", action="store_true")
     soak = kinds.add_parser(
         "soak", help="one long run with SLAM and the team: steps/s and memory over time"
@@ -543,12 +565,23 @@ def _cmd_bench_soak(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_explore(args: argparse.Namespace) -> int:
-    from scenarios.bench.explore import (
-        DEFAULT_SCENARIOS,
-        MODES,
-        format_explore_table,
-        run_explore_benchmark,
-    )
+    from scenarios.bench.explore import format_explore_table, summarise_reports
+
+    if args.from_dir is not None:
+        rows, runs = summarise_reports(args.from_dir)
+    else:
+        rows, runs = _run_bench_explore(args)
+    if args.json:
+        print(json.dumps({"summary": rows, "runs": runs}, indent=2))
+    else:
+        print(format_explore_table(rows))
+    return 0
+
+
+def _run_bench_explore(
+    args: argparse.Namespace,
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    from scenarios.bench.explore import DEFAULT_SCENARIOS, MODES, run_explore_benchmark
 
     if args.seeds < 1 or args.max_steps < 1 or args.jobs < 1:
         raise ValueError("--seeds, --max-steps and --jobs must be >= 1")
@@ -556,7 +589,7 @@ def _cmd_bench_explore(args: argparse.Namespace) -> int:
     unknown = [mode for mode in modes if mode not in MODES]
     if not modes or unknown:
         raise ValueError(f"--modes must name some of {', '.join(MODES)}, got {args.modes!r}")
-    rows, runs = run_explore_benchmark(
+    return run_explore_benchmark(
         args.scenarios or DEFAULT_SCENARIOS,
         range(args.seeds),
         args.max_steps,
@@ -565,12 +598,9 @@ def _cmd_bench_explore(args: argparse.Namespace) -> int:
         progress=None if args.json else lambda text: print(text, file=sys.stderr),
         policy=args.policy,
         robots=args.robots,
+        ray=args.ray,
+        out=args.out,
     )
-    if args.json:
-        print(json.dumps({"summary": rows, "runs": runs}, indent=2))
-    else:
-        print(format_explore_table(rows))
-    return 0
 
 
 def _cmd_bench_merge(args: argparse.Namespace) -> int:

@@ -1,12 +1,18 @@
-"""Sweeps: the process pool and Ray give the same results in task order."""
+"""Sweeps: the process pool and Ray give the same results in task order, and the same
+`bench explore` table; a folder of kept reports rebuilds it."""
 
 from __future__ import annotations
 
+import json
 import posixpath
 import sys
+from pathlib import Path
+from typing import Any
 
 import pytest
 
+from scenarios.bench.explore import format_explore_table, run_explore_benchmark, summarise_reports
+from scenarios.cli import main
 from scenarios.sweep import run_tasks
 
 PATHS = ["a/b", "c/d", "e", "f/g/h"]
@@ -36,3 +42,74 @@ def test_ray_missing_says_what_to_install(monkeypatch: pytest.MonkeyPatch) -> No
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
     with pytest.raises(ValueError, match=r"--ray needs Ray: pip install 'mrslam\[ray\]'"):
         run_tasks(posixpath.basename, PATHS, ray="")
+
+
+# --- bench explore: the same table from the pool, from Ray, and from kept reports ----------
+
+SWEEP = {"scenarios": ["office"], "seeds": range(2), "max_steps": 120, "modes": ("team",)}
+
+
+def _without_wall_time(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    return [{k: v for k, v in run.items() if k != "wall_time"} for run in runs]
+
+
+def _without_times(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    return [{k: v for k, v in row.items() if "wall" not in k} for row in rows]
+
+
+@pytest.fixture(scope="module")
+def pool_sweep(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Any, Any]:
+    out = tmp_path_factory.mktemp("sweep") / "kept"
+    rows, runs = run_explore_benchmark(**SWEEP, jobs=2, out=out)  # type: ignore[arg-type]
+    return out, rows, runs
+
+
+def test_a_ray_sweep_gives_the_same_table_as_the_pool(
+    pool_sweep: tuple[Path, Any, Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    pytest.importorskip("ray")
+    monkeypatch.setenv("TMPDIR", "/tmp")  # Ray's socket paths must stay short
+    _, rows, runs = pool_sweep
+    ray_rows, ray_runs = run_explore_benchmark(**SWEEP, jobs=2, ray="")  # type: ignore[arg-type]
+    assert len(runs) == 2
+    assert _without_wall_time(ray_runs) == _without_wall_time(runs)
+    assert _without_times(ray_rows) == _without_times(rows)
+    assert format_explore_table(ray_rows) == format_explore_table(rows)
+
+
+def test_out_keeps_each_report_and_the_table_and_the_summary_rebuilds_from_them(
+    pool_sweep: tuple[Path, Any, Any],
+) -> None:
+    out, rows, runs = pool_sweep
+    reports = sorted((out / "reports").glob("*.json"))
+    assert [r.name for r in reports] == ["office-0-team-2.json", "office-1-team-2.json"]
+    report = json.loads(reports[0].read_text(encoding="utf-8"))
+    assert report["seed"] == 0 and report["steps"] >= 1 and "coverage_curve" in report
+    assert (out / "explore.md").read_text(encoding="utf-8") == format_explore_table(rows) + "\n"
+    assert json.loads((out / "summary.json").read_text(encoding="utf-8"))["runs"] == runs
+    rebuilt_rows, rebuilt_runs = summarise_reports(out)
+    assert rebuilt_runs == runs and rebuilt_rows == rows
+
+
+def test_the_cli_rebuilds_the_table_from_a_folder_of_reports(
+    pool_sweep: tuple[Path, Any, Any], capsys: pytest.CaptureFixture[str]
+) -> None:
+    out, rows, _ = pool_sweep
+    assert main(["bench", "explore", "--from", str(out)]) == 0
+    assert capsys.readouterr().out == format_explore_table(rows) + "\n"
+
+
+def test_out_refuses_a_folder_that_holds_something(tmp_path: Path) -> None:
+    (tmp_path / "old.txt").write_text("keep me", encoding="utf-8")
+    with pytest.raises(ValueError, match="already exists and is not an empty folder"):
+        run_explore_benchmark(**SWEEP, out=tmp_path)  # type: ignore[arg-type]
+    assert (tmp_path / "old.txt").read_text(encoding="utf-8") == "keep me"
+
+
+def test_a_folder_without_reports_is_one_clear_error(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="no run reports"):
+        summarise_reports(tmp_path)
+    (tmp_path / "reports").mkdir()
+    (tmp_path / "reports" / "x.json").write_text("{}", encoding="utf-8")
+    with pytest.raises(ValueError, match="not a bench explore run report"):
+        summarise_reports(tmp_path)

@@ -56,19 +56,20 @@ job.
 
 from __future__ import annotations
 
+import json
 import math
 import statistics
 import tempfile
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from agents.policy import policy_label
+from mrslam_env.atomic import write_text_atomic
 from mrslam_env.config import EnvConfig
 from scenarios.experiment import RunConfig, check_policy, run_experiment
+from scenarios.sweep import run_tasks
 
 __all__ = [
     "DEFAULT_SCENARIOS",
@@ -77,6 +78,8 @@ __all__ = [
     "is_wrong",
     "oracle_gain_share",
     "run_explore_benchmark",
+    "run_row",
+    "summarise_reports",
 ]
 
 DEFAULT_SCENARIOS = ("office", "warehouse", "maze", "twin_wings", "procedural-0")
@@ -139,22 +142,48 @@ def _run(
     return run_experiment(config)
 
 
-def _task(args: tuple[str, int, int, str, str | None, int, str]) -> dict[str, Any]:
-    scenario, seed, max_steps, mode, policy, robots, folder = args
-    report = _run(scenario, seed, max_steps, mode, policy, robots, Path(folder))
+Task = tuple[int, str, int, int, str | None, int, str]
+"""One run: (index in the sweep, scenario, seed, max_steps, policy spec or None, robots,
+mode)."""
+
+
+def _task(task: Task) -> dict[str, Any]:
+    """One run's report (the JSON of ``mrslam run``) with the task under ``"bench"``. The
+    run writes into a folder of its own, deleted after: a Ray worker may be on another
+    machine, so the report travels back as the result and the caller keeps it."""
+    index, scenario, seed, max_steps, policy, robots, mode = task
+    with tempfile.TemporaryDirectory(prefix="mrslam-bench-explore-") as folder:
+        report = _run(scenario, seed, max_steps, mode, policy, robots, Path(folder))
+    report["outputs"] = {}  # the files went with the folder
+    report["bench"] = {
+        "index": index,
+        "scenario": scenario,
+        "seed": seed,
+        "max_steps": max_steps,
+        "mode": mode,
+        "policy_spec": policy,
+        "robots": robots,
+    }
+    return report
+
+
+def run_row(report: dict[str, Any]) -> dict[str, Any]:
+    """The benchmark's row of one run, from its report (as :func:`_task` returns it and
+    ``--out`` keeps it)."""
+    bench = report["bench"]
+    mode, robots = bench["mode"], bench["robots"]
     merge = report["merge"]
-    limit = max_steps * 0.1
     collisions = report["collision_steps"]
     moving = ["robot_0"] if mode == "single" else list(collisions)
     return {
-        "scenario": scenario,
-        "seed": seed,
+        "scenario": bench["scenario"],
+        "seed": bench["seed"],
         "mode": mode,
         "policy": report["policy"],
         "robots": robots,
         "joined": merge.get("joined", int(merge["verified"])),
         "t90": report["t90"],
-        "t90_or_limit": report["t90"] if report["t90"] is not None else limit,
+        "t90_or_limit": report["t90"] if report["t90"] is not None else bench["max_steps"] * 0.1,
         "verified": merge["verified"],
         "translation_error": merge["translation_error"],
         "rotation_error": merge["rotation_error"],
@@ -168,6 +197,12 @@ def _task(args: tuple[str, int, int, str, str | None, int, str]) -> dict[str, An
     }
 
 
+def _report_name(report: dict[str, Any]) -> str:
+    bench = report["bench"]
+    name = f"{bench['scenario']}-{bench['seed']}-{bench['mode']}-{bench['robots']}"
+    return name if bench["policy_spec"] is None else f"{name}-{report['policy']}"
+
+
 def run_explore_benchmark(
     scenarios: Sequence[str] = DEFAULT_SCENARIOS,
     seeds: Sequence[int] = range(5),
@@ -178,49 +213,103 @@ def run_explore_benchmark(
     progress: Callable[[str], None] | None = None,
     policy: str | None = None,
     robots: Sequence[int] = (2,),
+    ray: str | None = None,
+    out: Path | None = None,
 ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """Run the benchmark (``jobs`` runs at a time, in processes) in the given ``modes``
     (of :data:`MODES`), with the frontier explorer and, when given, the exploration
     ``policy`` (``module:factory``) too; returns (summary rows per scenario and policy,
-    per-run rows). ``robots``: the team sizes, one summary row per scenario and size."""
+    per-run rows). ``robots``: the team sizes, one summary row per scenario and size.
+
+    ``ray``: run as Ray tasks (``""`` a local instance, else a cluster address;
+    :mod:`scenarios.sweep`) instead of the process pool; the rows are the same. ``out``: a
+    new (or empty) folder that keeps every run's report, ``reports/<run>.json``, as it
+    arrives, and the table, ``explore.md``, and ``summary.json`` at the end;
+    :func:`summarise_reports` rebuilds the summary from it."""
     for mode in modes:
         _mode_config(mode)
     for size in robots:
         RunConfig(robots=size)  # refuses a bad size before any run
     check_policy(policy, EnvConfig())
     policies = [None] if policy is None else [None, policy]
-    with tempfile.TemporaryDirectory(prefix="mrslam-bench-explore-") as folder:
-        tasks = [
-            (scenario, seed, max_steps, mode, spec, size, folder)
+    if out is not None:
+        _check_out(out)
+    tasks: list[Task] = [
+        (index, *run)
+        for index, run in enumerate(
+            (scenario, seed, max_steps, spec, size, mode)
             for scenario in scenarios
             for size in robots
             for seed in seeds
             for spec in policies
             for mode in modes
-        ]
-        runs: list[dict[str, Any]] = []
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            for row in pool.map(_task, tasks):
-                runs.append(row)
-                if progress is not None:
-                    label = "" if policy is None else f" ({row['policy']})"
-                    label += "" if list(robots) == [2] else f", {row['robots']} robots"
-                    progress(
-                        f"{row['scenario']} seed {row['seed']} {row['mode']}{label}: "
-                        f"t90 {row['t90']}"
-                    )
-    labels = [policy_label(spec) for spec in policies]
+        )
+    ]
+
+    def arrived(report: dict[str, Any]) -> None:
+        if out is not None:
+            text = json.dumps(report, indent=2) + "\n"
+            write_text_atomic(out / "reports" / f"{_report_name(report)}.json", text)
+        if progress is not None:
+            row = run_row(report)
+            label = "" if policy is None else f" ({row['policy']})"
+            label += "" if list(robots) == [2] else f", {row['robots']} robots"
+            progress(f"{row['scenario']} seed {row['seed']} {row['mode']}{label}: t90 {row['t90']}")
+
+    reports = run_tasks(_task, tasks, jobs=jobs, ray=ray, on_result=arrived)
+    runs = [run_row(report) for report in reports]
+    rows = _summary_rows(runs)
+    if out is not None:
+        write_text_atomic(out / "explore.md", format_explore_table(rows) + "\n")
+        summary = json.dumps({"summary": rows, "runs": runs}, indent=2) + "\n"
+        write_text_atomic(out / "summary.json", summary)
+    return rows, runs
+
+
+def _check_out(out: Path) -> None:
+    """``out`` must be a new or empty folder: a sweep never mixes its reports with another's."""
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise ValueError(f"--out {out}: already exists and is not an empty folder")
+    (out / "reports").mkdir(parents=True, exist_ok=True)
+
+
+def summarise_reports(folder: Path) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """(summary rows, per-run rows) rebuilt from the reports a sweep kept
+    (``folder/reports/*.json``, or ``folder/*.json``): the same rows
+    :func:`run_explore_benchmark` returned, for the runs that are there."""
+    files = sorted((folder / "reports").glob("*.json")) or sorted(
+        f for f in folder.glob("*.json") if f.name != "summary.json"
+    )
+    if not files:
+        raise ValueError(f"{folder}: no run reports (reports/*.json) to summarise")
+    keyed = []
+    for file in files:
+        try:
+            report = json.loads(file.read_text(encoding="utf-8"))
+            keyed.append((report["bench"]["index"], run_row(report)))
+        except (json.JSONDecodeError, KeyError, TypeError) as error:
+            raise ValueError(f"{file}: not a bench explore run report ({error!r})") from error
+    runs = [row for _, row in sorted(keyed, key=lambda pair: pair[0])]
+    return _summary_rows(runs), runs
+
+
+def _summary_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per scenario, team size and policy (in the runs' order), and the ``all``
+    rows when there are several scenarios."""
+    scenarios = list(dict.fromkeys(r["scenario"] for r in runs))
+    sizes = list(dict.fromkeys(r["robots"] for r in runs))
+    labels = list(dict.fromkeys(r["policy"] for r in runs))
     rows = [
         _summarise(scenario, runs, policy=label, robots=size)
         for scenario in scenarios
-        for size in robots
+        for size in sizes
         for label in labels
     ]
     if len(scenarios) > 1:
         rows += [
-            _summarise(None, runs, policy=label, robots=size) for size in robots for label in labels
+            _summarise(None, runs, policy=label, robots=size) for size in sizes for label in labels
         ]
-    return rows, runs
+    return rows
 
 
 def _spread(values: Sequence[float]) -> tuple[float, float, float] | None:
