@@ -27,6 +27,7 @@ __all__ = [
     "GridMap",
     "crop_to_known",
     "grid_footprint",
+    "grid_in_frame",
     "resample_cells",
 ]
 
@@ -219,12 +220,13 @@ def crop_to_known(grid: GridMap, margin: int = 0) -> GridMap:
     """
     if margin < 0:
         raise ValueError(f"margin must be >= 0 cells, got {margin}")
-    known_rows = np.flatnonzero((grid.cells != UNKNOWN).any(axis=1))
-    if known_rows.size == 0:
+    # One pass over the cells without a temporary as large as the grid: a 4000 x 4000
+    # map costs no more memory to crop than its known box.
+    low_row, high_row, low_col, high_col = _known_box(grid.cells)
+    if high_row < 0:
         return grid
-    known_cols = np.flatnonzero((grid.cells != UNKNOWN).any(axis=0))
-    r0, r1 = int(known_rows[0]) - margin, int(known_rows[-1]) + 1 + margin
-    c0, c1 = int(known_cols[0]) - margin, int(known_cols[-1]) + 1 + margin
+    r0, r1 = low_row - margin, high_row + 1 + margin
+    c0, c1 = low_col - margin, high_col + 1 + margin
     rows, cols = grid.shape
     if (r0, c0, r1, c1) == (0, 0, rows, cols):
         return grid
@@ -235,3 +237,67 @@ def crop_to_known(grid: GridMap, margin: int = 0) -> GridMap:
     ] = inner
     origin = (grid.origin[0] + c0 * grid.resolution, grid.origin[1] + r0 * grid.resolution)
     return GridMap(cells=cells, resolution=grid.resolution, origin=origin)
+
+
+def grid_in_frame(grid: GridMap, frame_from_grid: ArrayLike) -> GridMap:
+    """The grid resampled (nearest cell, :func:`resample_cells`) into another frame, at its
+    own resolution, axis-aligned in that frame.
+
+    The raster is the bounding box of the grid's footprint in the frame (cells outside
+    the grid are UNKNOWN). A quarter turn with a lattice-exact translation reproduces every
+    cell; any other rotation is the nearest-cell picture of the turned grid (a wall one
+    cell thick stays unbroken: turned by less than 45 degrees, it still covers a cell
+    centre in every row or column it crosses).
+
+    Parameters
+    ----------
+    grid : GridMap
+    frame_from_grid : array_like, shape (3,)
+        Pose of the grid's frame in the target frame (m, m, rad).
+
+    Returns
+    -------
+    GridMap
+        ``grid`` itself when ``frame_from_grid`` is the identity.
+    """
+    transform = np.asarray(frame_from_grid, dtype=np.float64)
+    if transform.shape != (3,) or not np.all(np.isfinite(transform)):
+        raise ValueError(f"frame_from_grid must be 3 finite numbers, got {frame_from_grid!r}")
+    if not transform.any():
+        return grid
+    corners = grid_footprint(grid, transform)
+    resolution = grid.resolution
+    low = corners.min(axis=0)
+    span = corners.max(axis=0) - low
+    # Shave float noise so that a quarter turn of an n x m grid is exactly m x n cells.
+    cols, rows = (math.ceil(float(v) / resolution - 1e-6) for v in span)
+    origin = (float(low[0]), float(low[1]))
+    cells = resample_cells(grid, transform, origin, (max(rows, 1), max(cols, 1)), resolution)
+    return GridMap(cells=cells, resolution=resolution, origin=origin)
+
+
+@numba.njit(cache=True)
+def _known_box(cells: NDArray[np.int8]) -> tuple[int, int, int, int]:
+    """First and last row, first and last column holding a known cell; (-1, -1, -1, -1)
+    when none is known."""
+    rows, cols = cells.shape
+    low_row, high_row, low_col, high_col = -1, -1, cols, -1
+    for row in range(rows):
+        first = -1
+        for col in range(cols):
+            if cells[row, col] != -1:
+                first = col
+                break
+        if first < 0:
+            continue
+        if low_row < 0:
+            low_row = row
+        high_row = row
+        low_col = min(low_col, first)
+        for col in range(cols - 1, max(first, high_col) - 1, -1):
+            if cells[row, col] != -1:
+                high_col = max(high_col, col)
+                break
+    if low_row < 0:
+        return -1, -1, -1, -1
+    return low_row, high_row, low_col, high_col

@@ -31,14 +31,18 @@ a quirk not reproduced). Images with 16-bit samples are rejected. Image row 0 is
 **top** of the map (highest y) whereas grid row 0 is the lowest y, so rows are flipped on
 read and write.
 
-The origin's yaw is accepted and ignored, as "many parts of the system" in ROS do; a
-non-zero yaw raises a :class:`UserWarning`, since the grid is then not where the file
-says it is.
+The origin is the pose of the outer corner of the image's bottom-left pixel in the map
+frame, yaw included (the ROS meaning; many ROS nodes ignore the yaw). :func:`load_map`
+honours it: a map with a non-zero yaw is resampled (nearest cell,
+:func:`~mrslam_env.gridmap.grid_in_frame`) into an axis-aligned grid of the map frame, so
+that everything computed from it (a merge transform, a fused map) is in the file's frame.
+:func:`load_map_lattice` gives the image's own grid and the yaw instead, unresampled.
 
 Writing produces what ``map_saver`` writes: a PGM ``P5`` with 0 = occupied, 254 = free,
 205 = unknown and a YAML with ``occupied_thresh: 0.65``, ``free_thresh: 0.196``,
-``negate: 0``, ``mode: trinary`` and a zero yaw. ``load_map(save_map(path, grid))``
-reproduces ``grid`` exactly.
+``negate: 0``, ``mode: trinary`` and the yaw given (default 0).
+``load_map(save_map(path, grid))`` reproduces ``grid`` exactly, and
+``load_map_lattice(save_map(path, grid, yaw=a))`` gives back ``grid`` and ``a``.
 
 Every problem with an input file raises :class:`MapFileError` with a one-line message
 ``"<file>: <problem>"``.
@@ -49,7 +53,6 @@ from __future__ import annotations
 import math
 import os
 import re
-import warnings
 from pathlib import Path
 from typing import Any
 
@@ -58,7 +61,7 @@ import yaml
 from numpy.typing import NDArray
 
 from mrslam_env.atomic import write_bytes_atomic, write_text_atomic
-from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
+from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap, grid_in_frame
 
 __all__ = [
     "FREE_PIXEL",
@@ -69,6 +72,8 @@ __all__ = [
     "check_grid_size",
     "grey_to_cells",
     "load_map",
+    "load_map_lattice",
+    "map_frame_from_lattice",
     "map_images",
     "map_yaml_path",
     "read_image",
@@ -381,7 +386,7 @@ def _read_yaml(yaml_path: Path) -> dict[str, Any]:
 
 
 def load_map(path: PathLike) -> GridMap:
-    """Load a ROS ``map_server`` map (YAML + image).
+    """Load a ROS ``map_server`` map (YAML + image) as a grid of the map's frame.
 
     Parameters
     ----------
@@ -391,19 +396,48 @@ def load_map(path: PathLike) -> GridMap:
     Returns
     -------
     GridMap
-        Cells with row 0 at the lowest y (the image's bottom row), ``resolution`` in m per
-        cell, ``origin`` = the YAML's origin x, y (m). The origin yaw is ignored.
+        With a zero origin yaw: the image's cells with row 0 at the lowest y (the image's
+        bottom row), ``resolution`` in m per cell, ``origin`` = the YAML's origin x, y (m),
+        exactly. With a non-zero yaw: the image turned by the yaw about the origin corner
+        and resampled (nearest cell) into an axis-aligned grid of the map frame, the
+        bounding box of its footprint (:func:`load_map_lattice` gives the image's grid
+        and the yaw unresampled).
 
     Raises
     ------
     MapFileError
         Missing or unparsable YAML, a missing or invalid key, an unsupported mode, bad
         thresholds, or a missing, corrupt, empty or 16-bit image.
+    """
+    grid, yaw = load_map_lattice(path)
+    if yaw == 0.0:
+        return grid
+    return grid_in_frame(grid, map_frame_from_lattice(grid, yaw))
 
-    Warns
-    -----
-    UserWarning
-        If the origin's yaw is non-zero (it is ignored, as in most of ROS).
+
+def map_frame_from_lattice(grid: GridMap, yaw: float) -> NDArray[np.float64]:
+    """``map_from_lattice``: where a point of ``grid`` (as :func:`load_map_lattice` reads
+    it, origin x, y and no yaw) lies in the map frame of a file whose origin has ``yaw``:
+    the grid turned by ``yaw`` about its origin corner."""
+    x0, y0 = grid.origin
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([x0 - (c * x0 - s * y0), y0 - (s * x0 + c * y0), yaw], dtype=np.float64)
+
+
+def load_map_lattice(path: PathLike) -> tuple[GridMap, float]:
+    """Load a ROS ``map_server`` map as the image's own grid and the origin's yaw.
+
+    Returns
+    -------
+    tuple of (GridMap, float)
+        The cells with row 0 at the image's bottom row, ``origin`` = the YAML's origin x, y
+        (m), and the origin yaw (rad, as written). The grid lies in the map frame when the
+        yaw is 0; otherwise :func:`map_frame_from_lattice` places it there.
+
+    Raises
+    ------
+    MapFileError
+        As :func:`load_map`.
     """
     yaml_path = Path(path)
     document = _read_yaml(yaml_path)
@@ -441,13 +475,6 @@ def load_map(path: PathLike) -> GridMap:
         raise MapFileError(
             yaml_path, f"unsupported mode {mode!r}; expected one of {', '.join(MODES)}"
         )
-    if yaw != 0.0:
-        warnings.warn(
-            f"{yaml_path}: origin yaw {yaw} rad is ignored (the map is read axis-aligned)",
-            UserWarning,
-            stacklevel=2,
-        )
-
     image_path = Path(image_name)
     if not image_path.is_absolute():
         image_path = yaml_path.parent / image_path
@@ -461,10 +488,13 @@ def load_map(path: PathLike) -> GridMap:
         free_thresh=free_thresh,
         mode=mode,
     )
-    return GridMap(cells=np.ascontiguousarray(cells[::-1]), resolution=resolution, origin=(x0, y0))
+    grid = GridMap(cells=np.ascontiguousarray(cells[::-1]), resolution=resolution, origin=(x0, y0))
+    return grid, yaw
 
 
-def save_map(path_yaml: PathLike, grid: GridMap, image_name: str | None = None) -> Path:
+def save_map(
+    path_yaml: PathLike, grid: GridMap, image_name: str | None = None, *, yaw: float = 0.0
+) -> Path:
     """Write a grid as a ROS ``map_server`` map: a PGM ``P5`` image and a YAML file.
 
     Parameters
@@ -478,6 +508,10 @@ def save_map(path_yaml: PathLike, grid: GridMap, image_name: str | None = None) 
     image_name : str, optional
         Image file name relative to the YAML's folder (default: the YAML's stem + ``.pgm``).
         Sub-folders are created as needed.
+    yaw : float
+        The origin's yaw (rad): the map frame in which the grid is turned by ``yaw`` about
+        its origin corner (:func:`map_frame_from_lattice`). 0 (default): the grid's own
+        frame.
 
     Returns
     -------
@@ -485,6 +519,8 @@ def save_map(path_yaml: PathLike, grid: GridMap, image_name: str | None = None) 
         The YAML file written.
     """
     yaml_path = map_yaml_path(path_yaml)
+    if not math.isfinite(yaw):
+        raise ValueError(f"yaw must be finite, got {yaw}")
     if image_name is None:
         image_name = yaml_path.with_suffix(".pgm").name
     if Path(image_name).is_absolute():
@@ -504,7 +540,7 @@ def save_map(path_yaml: PathLike, grid: GridMap, image_name: str | None = None) 
         "image": Path(image_name).as_posix(),
         "mode": "trinary",
         "resolution": float(grid.resolution),
-        "origin": [float(grid.origin[0]), float(grid.origin[1]), 0.0],
+        "origin": [float(grid.origin[0]), float(grid.origin[1]), float(yaw)],
         "negate": 0,
         "occupied_thresh": SAVED_OCCUPIED_THRESH,
         "free_thresh": SAVED_FREE_THRESH,

@@ -249,7 +249,7 @@ def _build_parser() -> argparse.ArgumentParser:
     merge.add_argument(
         "--variants",
         default="pad4000,yaw,res",
-        help="variants ours and ours-crop also run on, on every set but the built-in one: "
+        help="variants ours and ours-nocrop also run on, on every set but the built-in one: "
         "pad4000, yaw, "
         "res, comma-separated, or none (default: pad4000,yaw,res)",
     )
@@ -257,7 +257,7 @@ def _build_parser() -> argparse.ArgumentParser:
     merge.add_argument(
         "--methods",
         default="ours,random-walk,features",
-        help="comma-separated methods: ours, ours-crop, random-walk, features, hough "
+        help="comma-separated methods: ours, ours-nocrop, random-walk, features, hough "
         "(default: ours,random-walk,features)",
     )
     merge.add_argument("--regenerate", action="store_true", help="rebuild the cached pairs")
@@ -684,7 +684,7 @@ def _cmd_bench_merge(args: argparse.Namespace) -> int:
                 twin = twins.get(row["pair_id"])
                 row["undecidable"] = None if twin is None else twin.undecidable
                 row["twin_overlap"] = None if twin is None else twin.twin_overlap
-        bases = [m for m in ("ours", "ours-crop") if m in methods]
+        bases = [m for m in ("ours", "ours-nocrop") if m in methods]
         columns = list(methods) + [f"{m}+{v}" for v in set_variants for m in bases]
         for row in rows:
             row["pair_set"] = title

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from mrslam_env.evaluation import relative_transform_error
+from mrslam_env.geometry import transform_points
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.mapio import map_images
 from scenarios.bench.merge import methods as merge_methods
@@ -135,16 +136,22 @@ def test_padding_keeps_every_cell_in_place() -> None:
     assert pad_grid(grid).shape == (PAD_CELLS, PAD_CELLS)
 
 
-def test_yaw_variant_warns_and_moves_the_truth_by_the_yaw() -> None:
-    changed, warned = yaw_variant(pair())
-    assert warned
-    np.testing.assert_array_equal(changed.m2.cells, room().cells)
+def test_yaw_variant_turns_map_2_and_moves_the_truth_by_the_yaw() -> None:
+    changed = yaw_variant(pair())
     assert changed.map1_from_map2[2] == pytest.approx(TRUTH[2] - VARIANT_YAW)
     # the file rotates the grid about its origin corner: the two truths agree there
     corner = np.array(room().origin)
     translation, rotation = relative_transform_error(changed.map1_from_map2, TRUTH, corner)
     assert translation == pytest.approx(0.0, abs=1e-9)
     assert math.degrees(rotation) == pytest.approx(math.degrees(VARIANT_YAW))
+    # the grid read is the room in the file's frame: under the new truth its walls land
+    # where the old truth puts the room's walls
+    old_walls = transform_points(TRUTH, room().cell_to_world(np.argwhere(room().occupied)))
+    new_walls = transform_points(
+        changed.map1_from_map2, changed.m2.cell_to_world(np.argwhere(changed.m2.occupied))
+    )
+    nearest = np.linalg.norm(new_walls[:, None, :] - old_walls[None, :, :], axis=2).min(axis=1)
+    assert nearest.max() <= room().resolution
 
 
 def test_resolution_variant() -> None:
@@ -164,7 +171,7 @@ def test_variant_rows_and_proposal_recall() -> None:
     first = rows[0]
     assert first["family"] == "real" and first["variant"] is None and first["candidates"] == 2
     assert first["proposal_hit"] is True
-    assert rows[1]["variant"] == "yaw" and rows[1]["variant_warned"] is True
+    assert rows[1]["variant"] == "yaw" and rows[1]["variant_yaw"] == VARIANT_YAW
     assert rows[1]["proposal_hit"] is False  # the truth moved by the yaw
     assert rows[3]["proposal_hit"] is None  # no overlap
     summary = summarize(rows, ["ours", "ours+yaw", "ours+res"])

@@ -145,14 +145,18 @@ def test_output_is_a_loadable_merged_map(json_run: JsonRun, pair_files: PairFile
     merged = load_map(json_run.merged_path)
     m1, m2 = pair_files.m1, pair_files.m2
     assert merged.resolution == pytest.approx(m1.resolution)
-    # In map 1's frame, on its lattice: m1 sits inside it unchanged where known.
+    # In map 1's frame, on its lattice: m1's known cells sit inside it unchanged (the
+    # merged map spans the two maps' known areas, not m1's whole grid).
     offset = (np.asarray(m1.origin) - np.asarray(merged.origin)) / merged.resolution
     col0, row0 = np.rint(offset).astype(int)
     np.testing.assert_allclose(offset, [col0, row0], atol=1e-6)
-    rows, cols = m1.shape
-    block = merged.cells[row0 : row0 + rows, col0 : col0 + cols]
-    assert np.all(block[~m1.unknown] != UNKNOWN)
-    assert np.all(block[m1.occupied] == OCCUPIED)
+    for mask, check in (
+        (~m1.unknown, lambda v: v != UNKNOWN),
+        (m1.occupied, lambda v: v == OCCUPIED),
+    ):
+        cells = np.argwhere(mask) + np.array([row0, col0])
+        assert merged.contains(cells).all()
+        assert np.all(check(merged.cells[cells[:, 0], cells[:, 1]]))
     known = np.count_nonzero(~merged.unknown)
     assert np.count_nonzero(~m1.unknown) < known
     assert np.count_nonzero(~m2.unknown) < known

@@ -11,7 +11,14 @@ import yaml
 from PIL import Image
 
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
-from mrslam_env.mapio import MapFileError, grey_to_cells, load_map, read_image, save_map
+from mrslam_env.mapio import (
+    MapFileError,
+    grey_to_cells,
+    load_map,
+    load_map_lattice,
+    read_image,
+    save_map,
+)
 
 FR, OC, UN = int(FREE), int(OCCUPIED), int(UNKNOWN)
 
@@ -215,14 +222,68 @@ def test_image_path_relative_to_yaml_folder(tmp_path: Path) -> None:
     assert grid.occupied.all()
 
 
-def test_origin_yaw_is_ignored_with_a_warning(tmp_path: Path) -> None:
-    write_pgm(tmp_path / "map.pgm", GREY_LEVELS)
-    with pytest.warns(UserWarning, match="yaw 0.3 rad is ignored"):
-        grid = load_map(write_yaml(tmp_path / "map.yaml", origin=[1.0, 2.0, 0.3]))
-    assert grid.origin == (1.0, 2.0)
+def test_a_quarter_turn_yaw_turns_the_grid_exactly(tmp_path: Path) -> None:
+    # The origin is the pose of the image's bottom-left corner in the map frame: with
+    # yaw pi/2 the image's bottom row runs up the map's y axis from (1, 2).
+    cells = np.array([[OC, FR, FR], [UN, FR, OC]], dtype=np.int8)  # row 0 = lowest y
+    grid = GridMap(cells=cells, resolution=0.5, origin=(1.0, 2.0))
     with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        load_map(write_yaml(tmp_path / "zero.yaml", origin=[1.0, 2.0, 0.0]))
+        warnings.simplefilter("error")  # a yaw is read, not warned about
+        loaded = load_map(save_map(tmp_path / "turned.yaml", grid, yaw=np.pi / 2))
+    # Row 0 is the lowest y, so a counter-clockwise turn is numpy's clockwise one.
+    np.testing.assert_array_equal(loaded.cells, np.rot90(cells, k=-1))
+    assert loaded.origin == pytest.approx((0.0, 2.0))
+    assert loaded.resolution == 0.5
+    # The occupied corner cell [0, 0] (centre 0.25 m along the image's bottom row and
+    # 0.25 m up from it) is at (1 - 0.25, 2 + 0.25) in the map frame.
+    assert loaded.cells[tuple(loaded.world_to_cell([0.75, 2.25]))] == OC
+
+
+def test_any_yaw_places_every_cell_where_the_file_says(tmp_path: Path) -> None:
+    grid = random_grid(np.random.default_rng(4), (30, 40))
+    yaw = 0.3
+    loaded = load_map(save_map(tmp_path / "turned.yaml", grid, yaw=yaw))
+    # Nearest cell: each loaded cell holds the lattice cell under its centre, taken back
+    # through the origin pose (x0, y0, yaw).
+    x0, y0 = grid.origin
+    rows, cols = np.nonzero(loaded.cells != UN)
+    centres = loaded.cell_to_world(np.stack([rows, cols], axis=1)) - np.array([x0, y0])
+    c, s = np.cos(yaw), np.sin(yaw)
+    local = np.stack(
+        [c * centres[:, 0] + s * centres[:, 1], -s * centres[:, 0] + c * centres[:, 1]], 1
+    )
+    source = grid.world_to_cell(local + np.array([x0, y0]))
+    np.testing.assert_array_equal(loaded.cells[rows, cols], grid.cells[source[:, 0], source[:, 1]])
+    # Nothing is lost: every lattice cell is picked at least once but for a few on the
+    # rim (nearest-cell resampling at the same resolution), and the counts of the three
+    # classes agree within 3 %.
+    assert len(rows) >= 0.97 * (grid.cells != UN).sum()
+    for value in (FR, OC):
+        assert (loaded.cells == value).sum() == pytest.approx((grid.cells == value).sum(), rel=0.03)
+
+
+def test_a_map_written_with_a_yaw_round_trips(tmp_path: Path) -> None:
+    grid = random_grid(np.random.default_rng(2), (21, 34))
+    path = save_map(tmp_path / "yawed.yaml", grid, yaw=-0.7)
+    assert yaml.safe_load(path.read_text())["origin"] == [-12.345, 6.789, -0.7]
+    lattice, yaw = load_map_lattice(path)
+    np.testing.assert_array_equal(lattice.cells, grid.cells)
+    assert (lattice.origin, lattice.resolution, yaw) == (grid.origin, grid.resolution, -0.7)
+    # The map read in its frame, written (yaw 0) and read again is the same grid.
+    in_frame = load_map(path)
+    again = load_map(save_map(tmp_path / "again.yaml", in_frame))
+    np.testing.assert_array_equal(again.cells, in_frame.cells)
+    assert again.origin == in_frame.origin
+    with pytest.raises(ValueError, match="yaw must be finite"):
+        save_map(tmp_path / "bad.yaml", grid, yaw=float("nan"))
+
+
+def test_zero_yaw_is_read_unchanged(tmp_path: Path) -> None:
+    write_pgm(tmp_path / "map.pgm", GREY_LEVELS)
+    lattice, yaw = load_map_lattice(write_yaml(tmp_path / "zero.yaml", origin=[1.0, 2.0, 0.0]))
+    loaded = load_map(tmp_path / "zero.yaml")
+    assert yaw == 0.0 and loaded.origin == lattice.origin == (1.0, 2.0)
+    np.testing.assert_array_equal(loaded.cells, lattice.cells)
 
 
 def test_grey_to_cells_rejects_unknown_mode() -> None:

@@ -28,7 +28,7 @@ from mrslam_env.merge.decide import (
     decide,
     judge,
     rule_confident_fit,
-    rule_correlation_covers_enough,
+    rule_covers_enough,
     rule_has_candidates,
     rule_small_overlap_fits_tightly,
     rule_unambiguous,
@@ -309,50 +309,27 @@ def test_a_contradicted_rival_is_ambiguous_only_from_its_higher_ratio(
     assert (why is not None) is refused
 
 
-# -- rule_correlation_covers_enough ------------------------------------------------------------
+# -- rule_covers_enough ------------------------------------------------------------------------
 
 
-def _correlation_best(overlap_fraction: float) -> ScoredHypothesis:
+def _covering(overlap_fraction: float, proposed_by: str = "correlation") -> ScoredHypothesis:
     agreement = _agreement(overlap_fraction=overlap_fraction)
-    return _candidate(0.0, agreement=agreement, proposed_by="correlation")
+    return _candidate(0.0, agreement=agreement, proposed_by=proposed_by)
 
 
-def test_a_correlation_only_best_covering_too_little_is_refused() -> None:
-    candidates = _candidates(_correlation_best(0.15))
-    why = rule_correlation_covers_enough(candidates, CONFIG)
-    assert why == (
-        "only the wall correlation proposes the best transform and it overlaps "
-        "15% of the smaller map (< 20%)"
-    )
-    assert _refused_by(candidates) == (
-        "rule_correlation_covers_enough",
-        f"no confident merge: {why}",
-    )
+@pytest.mark.parametrize("source", ["correlation", "virtual robot", "symmetry"])
+def test_a_best_covering_too_little_is_refused_whoever_proposed_it(source: str) -> None:
+    candidates = _candidates(_covering(0.15, source))
+    why = rule_covers_enough(candidates, CONFIG)
+    assert why == "the best transform overlaps 15% of the smaller map (< 20%)"
+    assert _refused_by(candidates) == ("rule_covers_enough", f"no confident merge: {why}")
 
 
-def test_a_correlation_only_best_covering_enough_passes() -> None:
-    assert rule_correlation_covers_enough(_candidates(_correlation_best(0.2)), CONFIG) is None
-
-
-def test_a_small_correlation_best_passes_when_the_virtual_robot_agrees() -> None:
-    agreeing = _candidate(0.1, score=90.0)  # the same answer, confident, virtual robot
-    candidates = _candidates(_correlation_best(0.15), agreeing)
-    assert rule_correlation_covers_enough(candidates, CONFIG) is None
-    # ... but not when that agreeing candidate is not confident,
-    unsure = replace(agreeing, confident=False)
-    assert rule_correlation_covers_enough(_candidates(_correlation_best(0.15), unsure), CONFIG)
-    # ... nor when it is another correlation placement; an aliasing-check placement counts.
-    other = replace(agreeing, proposed_by="correlation")
-    candidates = _candidates(_correlation_best(0.15), other)
-    assert rule_correlation_covers_enough(candidates, CONFIG) is not None
-    symmetry = replace(agreeing, proposed_by="symmetry")
-    candidates = _candidates(_correlation_best(0.15), symmetry)
-    assert rule_correlation_covers_enough(candidates, CONFIG) is None
-
-
-def test_a_virtual_robot_best_may_cover_little() -> None:
-    best = replace(_correlation_best(0.05), proposed_by="virtual robot")
-    assert rule_correlation_covers_enough(_candidates(best), CONFIG) is None
+def test_a_best_covering_enough_passes() -> None:
+    assert rule_covers_enough(_candidates(_covering(0.2)), CONFIG) is None
+    # A confident rival that is the same answer changes nothing: the best is judged.
+    agreeing = _candidate(0.1, score=90.0)
+    assert rule_covers_enough(_candidates(_covering(0.15), agreeing), CONFIG) is not None
 
 
 # -- rule_small_overlap_fits_tightly ------------------------------------------------------------
@@ -403,7 +380,7 @@ def test_the_rules_apply_in_their_documented_order() -> None:
         "rule_has_candidates",
         "rule_confident_fit",
         "rule_unambiguous",
-        "rule_correlation_covers_enough",
+        "rule_covers_enough",
         "rule_small_overlap_fits_tightly",
     ]
 
@@ -416,11 +393,14 @@ def test_an_unconfident_best_is_refused_before_ambiguity_is_looked_at() -> None:
     assert rule == "rule_confident_fit"
 
 
-def test_ambiguity_is_refused_before_the_correlation_and_small_overlap_rules() -> None:
-    # Correlation-only, 7 m² and loose: three rules would refuse; ambiguity comes first.
+def test_ambiguity_is_refused_before_the_coverage_and_small_overlap_rules() -> None:
+    # 10 % of the smaller map, 7 m² and loose: three rules would refuse; ambiguity first,
+    # then coverage, whoever proposed it.
     best = replace(_small(psi=0.9, overlap_fraction=0.1), proposed_by="correlation")
     rival = _candidate(6.0, score=90.0)
     assert _refused_by(_candidates(best, rival))[0] == "rule_unambiguous"
-    assert _refused_by(_candidates(best))[0] == "rule_correlation_covers_enough"
+    assert _refused_by(_candidates(best))[0] == "rule_covers_enough"
     virtual = replace(best, proposed_by="virtual robot")
-    assert _refused_by(_candidates(virtual))[0] == "rule_small_overlap_fits_tightly"
+    assert _refused_by(_candidates(virtual))[0] == "rule_covers_enough"
+    covering = _small(psi=0.9, overlap_fraction=0.3)
+    assert _refused_by(_candidates(covering))[0] == "rule_small_overlap_fits_tightly"

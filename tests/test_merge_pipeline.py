@@ -15,7 +15,9 @@ by the tests that inspect them.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import tracemalloc
+from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,6 +26,7 @@ from merge_fixtures import map_pair, poses_near, scan_map
 from mrslam_env.evaluation import relative_transform_error
 from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
+from mrslam_env.mapio import load_map, map_frame_from_lattice, save_map
 from mrslam_env.merge.dissimilarity import DissimilarityConfig, acceptance_index
 from mrslam_env.merge.fuse import resample_map
 from mrslam_env.merge.pipeline import (
@@ -182,10 +185,10 @@ def test_result_reports_ranked_hypotheses_and_timings(overlapping: MergedPair) -
     for hypothesis in result.hypotheses:
         assert 0.0 <= hypothesis.acceptance_index <= 1.0
         assert 0.0 <= hypothesis.overlap <= 1.0
-        # Symmetry proposals (the aliasing check) and wall-correlation placements come
-        # from no virtual run.
+        # Symmetry proposals (the aliasing check), wall-correlation and Hough placements
+        # come from no virtual run.
         assert (hypothesis.votes >= 1) == (hypothesis.proposed_by == "virtual robot")
-        assert hypothesis.proposed_by in ("virtual robot", "correlation", "symmetry")
+        assert hypothesis.proposed_by in ("virtual robot", "correlation", "hough", "symmetry")
         assert hypothesis.map1_from_map2.shape == (3,)
     assert result.agreement is not None and result.agreement.index >= 0.9
     assert {"prepare", "hypotheses", "judge", "fuse", "total"} <= set(result.seconds)
@@ -197,23 +200,24 @@ def test_result_reports_ranked_hypotheses_and_timings(overlapping: MergedPair) -
     assert report["acceptance_index"] == pytest.approx(result.agreement.index, abs=1e-4)
 
 
-def _m1_block(fused: GridMap, m1: GridMap) -> np.ndarray:
-    """The fused cells over m1's grid (the fused map is on m1's lattice, grown)."""
+def _at_m1_cells(fused: GridMap, m1: GridMap, mask: np.ndarray) -> np.ndarray:
+    """The fused cells over m1's cells selected by ``mask``: the fused map is on m1's
+    lattice (whole cells apart) and spans both maps' known areas."""
     offset = (np.asarray(m1.origin) - np.asarray(fused.origin)) / fused.resolution
     col0, row0 = np.rint(offset).astype(int)
     np.testing.assert_allclose(offset, [col0, row0], atol=1e-6)  # on m1's lattice
-    rows, cols = m1.shape
-    return fused.cells[row0 : row0 + rows, col0 : col0 + cols]
+    cells = np.argwhere(mask) + np.array([row0, col0])
+    assert fused.contains(cells).all()
+    return fused.cells[cells[:, 0], cells[:, 1]]
 
 
 def test_fused_map_holds_both_maps(overlapping: MergedPair) -> None:
     m1, m2, result = overlapping.m1, overlapping.m2, overlapping.result
     fused = result.fused
     assert fused is not None and fused.resolution == m1.resolution
-    block = _m1_block(fused, m1)
     # m1 is kept: every known cell stays known, every wall stays a wall.
-    assert np.all(block[~m1.unknown] != UNKNOWN)
-    assert np.all(block[m1.occupied] == OCCUPIED)
+    assert np.all(_at_m1_cells(fused, m1, ~m1.unknown) != UNKNOWN)
+    assert np.all(_at_m1_cells(fused, m1, m1.occupied) == OCCUPIED)
     assert acceptance_index(fused, m1, np.zeros(3)).index >= 0.98
     # m2's known cells, placed by the answer, are known in the fused map and agree.
     centres = transform_points(result.transform, m2.cell_to_world(np.argwhere(~m2.unknown)))
@@ -352,7 +356,8 @@ def test_very_large_map_is_merged_coarse_to_fine(
 ) -> None:
     m1, m2, truth = warehouse_pair
     large1 = _padded(m1, (1500, 1500), (600, 500))  # 75 m x 75 m at 0.05 m
-    config = MergeConfig()
+    # Not cropped, so that the grid worked on is large (a map that knows 75 m x 75 m).
+    config = MergeConfig(crop_to_known=False)
     result = merge_maps(large1, m2, config, rng=SEED, trace=True)
     translation, rotation = errors(result, truth, m2)
     assert translation <= MERGE_TOLERANCE_M and rotation <= ONE_DEGREE
@@ -366,23 +371,66 @@ def test_very_large_map_is_merged_coarse_to_fine(
     assert result.fused.shape[0] >= 1500 and result.fused.shape[1] >= 1500
 
 
-def test_with_crop_to_known_padding_changes_nothing(
+def _traced(m1: GridMap, m2: GridMap, config: MergeConfig) -> tuple[MergeResult, int]:
+    """The merge and the peak of the memory Python and numpy allocated during it (bytes)."""
+    tracemalloc.start()
+    try:
+        result = merge_maps(m1, m2, config, rng=SEED, trace=True)
+        return result, tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_padding_changes_neither_the_answer_nor_the_cost(
     warehouse_pair: tuple[GridMap, GridMap, np.ndarray],
 ) -> None:
-    # gmapping-style unknown padding around map 2 (80 m x 80 m at 0.05 m): cut to the
-    # known area first, the merge sees the same grids and gives the same answer.
+    # gmapping's default: map 2 inside a 4000 x 4000 unknown grid (200 m x 200 m at
+    # 0.05 m). Cut to the known area first (the default), the merge works on the same
+    # grids, gives the same answer and fused map, and allocates no more memory.
     m1, m2, truth = warehouse_pair
-    config = MergeConfig(crop_to_known=True)
-    plain = merge_maps(m1, m2, config, rng=SEED, trace=True)
-    padded = merge_maps(m1, _padded(m2, (1600, 1600), (700, 650)), config, rng=SEED, trace=True)
+    config = MergeConfig()
+    assert config.crop_to_known
+    side = 4000
+    padded_m2 = _padded(m2, (side, side), ((side - m2.shape[0]) // 2, (side - m2.shape[1]) // 2))
+    plain, plain_peak = _traced(m1, m2, config)
+    padded, padded_peak = _traced(m1, padded_m2, config)
     assert plain.transform is not None and padded.transform is not None
-    np.testing.assert_array_equal(plain.transform, padded.transform)
-    assert plain.reason == padded.reason and plain.psi == padded.psi
+    # The same up to float rounding of the origins (the crop moves them by whole cells).
+    np.testing.assert_allclose(plain.transform, padded.transform, rtol=0, atol=1e-9)
+    assert plain.reason == padded.reason and plain.psi == pytest.approx(padded.psi)
     assert plain.trace is not None and padded.trace is not None
-    assert plain.trace.working2.shape == padded.trace.working2.shape
-    assert plain.trace.working2.origin == pytest.approx(padded.trace.working2.origin)
+    for attr in ("working1", "working2"):
+        before, after = getattr(plain.trace, attr), getattr(padded.trace, attr)
+        assert before.shape == after.shape
+        assert before.origin == pytest.approx(after.origin)
+    assert plain.fused is not None and padded.fused is not None
+    np.testing.assert_array_equal(plain.fused.cells, padded.fused.cells)
+    # The cost: the padding alone is 16 MB; the peak stays within 10 % of the plain one.
+    assert padded_m2.cells.nbytes == side * side
+    assert padded_peak <= 1.1 * plain_peak, (padded_peak, plain_peak)
     translation, rotation = errors(plain, truth, m2)
     assert translation <= MERGE_TOLERANCE_M and rotation <= ONE_DEGREE
+    # Without the crop the padding is worked on: the working grids differ.
+    uncropped = merge_maps(m1, padded_m2, replace(config, crop_to_known=False), rng=SEED,
+                           trace=True)  # fmt: skip
+    assert uncropped.trace is not None
+    assert uncropped.trace.working2.shape != plain.trace.working2.shape
+
+
+def test_a_map_saved_with_an_origin_yaw_merges_in_the_file_frame(
+    warehouse_pair: tuple[GridMap, GridMap, np.ndarray], tmp_path: Path
+) -> None:
+    # Map 2 written with origin yaw 0.3 rad: its file frame is the grid turned by 0.3 rad
+    # about the origin corner, and the merge answers in that frame.
+    m1, m2, truth = warehouse_pair
+    yaw = 0.3
+    loaded = load_map(save_map(tmp_path / "m2.yaml", m2, yaw=yaw))
+    file_from_grid = map_frame_from_lattice(m2, yaw)
+    truth_in_file = compose(truth, inverse(file_from_grid))
+    result = merge_maps(m1, loaded, rng=SEED)
+    translation, rotation = errors(result, truth_in_file, loaded)
+    assert translation <= MERGE_TOLERANCE_M, f"{translation:.4f} m"
+    assert rotation <= ONE_DEGREE, f"{math.degrees(rotation):.3f} deg"
 
 
 def test_same_seed_gives_the_same_result(

@@ -7,8 +7,8 @@ uses it.
 - On a realistic small overlap of the maze, the correlation ranks the true placement
   first; with a virtual robot too weak to find it, ``merge_maps`` merges it through the
   correlation (and refuses without it).
-- A correlation-only placement covering little of the smaller map is refused
-  (``MergeConfig.min_correlation_overlap``): on this procedural pair it is a wrong fit.
+- A placement covering little of the smaller map is refused, whoever proposed it
+  (``MergeConfig.min_overlap_fraction``): on this procedural pair it is a wrong fit.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from scipy import fft as scipy_fft
 
 from mrslam_env.evaluation import relative_transform_error
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
+from mrslam_env.merge import hypotheses
 from mrslam_env.merge.fuse import resample_map
 from mrslam_env.merge.hypotheses import (
     CorrelationConfig,
@@ -33,6 +34,7 @@ from mrslam_env.merge.hypotheses import (
 )
 from mrslam_env.merge.mcl import MclConfig
 from mrslam_env.merge.pipeline import MergeConfig, merge_maps
+from mrslam_env.merge.spectrum import hough_rotations
 from mrslam_env.merge.virtual import VirtualRobotConfig
 
 TRUTH = np.array([1.0, 2.0, 2.4])
@@ -174,23 +176,67 @@ def test_merge_finds_through_the_correlation_what_a_weak_virtual_robot_misses(
     moved, turned = relative_transform_error(result.transform, TRUTH, known_centroid(m2))
     assert moved < 0.1 and turned < math.radians(1.0)
     assert result.as_dict()["hypotheses"][0]["proposed_by"] == "correlation"
+    # Without the correlation (its Hough rotations included).
     without = merge_maps(m1, m2, replace(weak, correlation_candidates=0), rng=0)
     assert without.transform is None
 
 
-def test_a_small_correlation_only_fit_is_refused() -> None:
-    # 7 m apart in the procedural building: the correlation's best placement is a 180°
-    # wrong fit covering 15 % of the smaller map (the true one has too many conflicts).
+def test_hough_rotations_of_a_realistic_pair_contain_the_truth(
+    maze_small_overlap: tuple[GridMap, GridMap],
+) -> None:
+    m1, m2 = (resample_map(m, 0.1) for m in maze_small_overlap)
+    rotations = hough_rotations(m1, m2, peaks=2)
+    assert len(rotations) == 4
+    # theta and theta + pi for each peak
+    assert abs(math.remainder(rotations[1] - rotations[0] - math.pi, math.tau)) < 1e-9
+    best = min(abs(math.remainder(r - TRUTH[2], math.tau)) for r in rotations)
+    assert best < math.radians(2.0)
+    empty = GridMap(cells=np.full((20, 20), FREE, dtype=np.int8), resolution=0.1)
+    assert hough_rotations(m1, empty, peaks=2) == []
+
+
+def test_merge_finds_through_the_hough_source_what_the_others_miss(
+    maze_small_overlap: tuple[GridMap, GridMap], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    m1, m2 = maze_small_overlap
+    # A starved virtual robot, and wall orientations that point the correlation 45° off:
+    # only the Hough rotations lead to the truth, and the same decision step accepts it.
+    monkeypatch.setattr(hypotheses, "relative_rotations", lambda *args: [TRUTH[2] + math.pi / 4])
+    weak = MergeConfig(
+        virtual=VirtualRobotConfig(max_runs=2),
+        mcl=MclConfig(n_particles=20, initial_particles=40),
+        candidates=1,
+    )
+    result = merge_maps(m1, m2, weak, rng=0)
+    assert result.chosen is not None, result.reason
+    assert result.chosen.proposed_by == "hough" and result.chosen.votes == 0
+    assert result.transform is not None
+    moved, turned = relative_transform_error(result.transform, TRUTH, known_centroid(m2))
+    assert moved < 0.1 and turned < math.radians(1.0)
+    assert "hypotheses.hough" in result.seconds
+    without = merge_maps(m1, m2, replace(weak, hough_candidates=0), rng=0)
+    assert without.transform is None
+    # The live team's setting, the correlation off, turns the Hough placements off too.
+    off = merge_maps(m1, m2, replace(weak, correlation_candidates=0), rng=0)
+    assert off.transform is None and "hypotheses.hough" not in off.seconds
+
+
+def test_a_fit_covering_little_of_the_smaller_map_is_refused() -> None:
+    # 7 m apart in the procedural building: the best confident placement is a 180° wrong
+    # fit covering 15 % of the smaller map (the true one has too many conflicts). The wall
+    # correlation proposes it, and depending on the working grid the virtual robot too:
+    # the rule judges the placement, not who proposed it.
     m1, m2 = map_pair("procedural-1", (5, 5), (12, 6), TRUTH, seed=1, scans=8)
-    result = merge_maps(m1, m2, rng=0)
-    assert result.transform is None
-    assert "only the wall correlation" in result.reason, result.reason
-    best = result.hypotheses[0]
-    assert best.proposed_by == "correlation" and best.confident
-    moved, _ = relative_transform_error(best.map1_from_map2, TRUTH, known_centroid(m2))
-    assert moved > 1.0  # it was indeed wrong
+    for crop in (True, False):
+        result = merge_maps(m1, m2, MergeConfig(crop_to_known=crop), rng=0)
+        assert result.transform is None
+        assert "of the smaller map (< 20%)" in result.reason, result.reason
+        best = result.hypotheses[0]
+        assert best.confident and best.overlap < 0.2
+        moved, _ = relative_transform_error(best.map1_from_map2, TRUTH, known_centroid(m2))
+        assert moved > 1.0  # it was indeed wrong
     # Without the rule it would have been merged.
-    loose = merge_maps(m1, m2, MergeConfig(min_correlation_overlap=0.0), rng=0)
+    loose = merge_maps(m1, m2, MergeConfig(min_overlap_fraction=0.0), rng=0)
     assert loose.transform is not None
 
 
@@ -221,7 +267,11 @@ def test_correlation_config_out_of_range_names_the_field(field: str, value: obje
     [
         ("correlation_candidates", -1),
         ("correlation_candidates", 2.0),
-        ("min_correlation_overlap", 1.5),
+        ("min_overlap_fraction", 1.5),
+        ("hough_candidates", -1),
+        ("hough_peaks", 0),
+        ("hough_sweep", -0.1),
+        ("hough_sweep_step", 0.0),
         ("correlation", 3),
     ],
 )

@@ -22,7 +22,8 @@ from test_recording import Recording
 from mrslam_env.geometry import inverse, transform_points
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.mapio import load_map, save_map
-from mrslam_env.merge.pipeline import MergeResult, merge_maps
+from mrslam_env.merge.pipeline import MergeConfig, MergeResult, merge_maps
+from mrslam_env.merge.skeleton import SkeletonConfig, clean_free_space
 from mrslam_env.recording import Recorder, scan_hits_world
 from scenarios.cli import main
 
@@ -129,7 +130,8 @@ def test_inputs_and_fused_map_line_up_in_map1_frame(merged: Logged) -> None:
         assert rotation["angle"] == pytest.approx(0.0, abs=1e-9)
         (scale,) = only(recording, entity, "Transform3D:scale")
         np.testing.assert_allclose(scale, [m1.resolution, m1.resolution, 1.0])
-    # The fused grid is m1's lattice grown by whole cells ...
+    # The fused grid is on m1's lattice (whole cells apart; it spans both maps' known
+    # areas) ...
     fused = result.fused
     offset = (np.asarray(m1.origin) - np.asarray(fused.origin)) / fused.resolution
     col0, row0 = np.rint(offset).astype(int)
@@ -137,9 +139,11 @@ def test_inputs_and_fused_map_line_up_in_map1_frame(merged: Logged) -> None:
     # ... so its image, where map 1 has walls, shows walls at the same places.
     image = grid_image(recording, "/merge/result")
     assert image.shape == fused.shape
-    block = image[row0 : row0 + m1.shape[0], col0 : col0 + m1.shape[1]]
-    assert np.all(block[m1.occupied] == PIXEL[OCCUPIED])
-    assert np.all(block[~m1.unknown] != PIXEL[UNKNOWN])
+    walls = np.argwhere(m1.occupied) + np.array([row0, col0])
+    known = np.argwhere(~m1.unknown) + np.array([row0, col0])
+    assert fused.contains(known).all()
+    assert np.all(image[walls[:, 0], walls[:, 1]] == PIXEL[OCCUPIED])
+    assert np.all(image[known[:, 0], known[:, 1]] != PIXEL[UNKNOWN])
     np.testing.assert_array_equal(image == PIXEL[OCCUPIED], fused.occupied)
     # Map 2 is placed by the answer: its corner moved, its axes turned.
     (translation,) = only(recording, "/merge/map2", "Transform3D:translation")
@@ -147,6 +151,15 @@ def test_inputs_and_fused_map_line_up_in_map1_frame(merged: Logged) -> None:
     corner = transform_points(result.transform, np.array([m2.origin]))[0]
     np.testing.assert_allclose(translation, [*corner, 0.0], atol=1e-5)
     assert rotation["angle"] == pytest.approx(result.transform[2], abs=1e-6)
+
+
+def _cleaning(config: SkeletonConfig) -> dict[str, float]:
+    return {
+        "clearance": config.clearance,
+        "min_hole_area": config.min_hole_area,
+        "smoothing_radius": config.smoothing_radius,
+        "min_component_area": config.min_component_area,
+    }
 
 
 def test_skeletons_and_virtual_runs_lie_on_map1_free_space(merged: Logged) -> None:
@@ -162,22 +175,30 @@ def test_skeletons_and_virtual_runs_lie_on_map1_free_space(merged: Logged) -> No
     skeleton1 = only(recording, "/merge/skeleton/map1", "Points2D:positions")
     skeleton1 = np.asarray(skeleton1, dtype=np.float64)
     assert len(skeleton1) == np.count_nonzero(result.trace.hypotheses.skeleton1.skeleton)
-    # On map 1's free space, drawn where it belongs.
-    assert np.all(cells_of(skeleton1, working1) == FREE)
+    # On map 1's cleaned free space (FREE cells plus the small holes and noise specks
+    # the cleaning fills; the skeleton may cross a speck), drawn where it belongs.
+    cleaned = clean_free_space(working1, **_cleaning(MergeConfig().virtual.skeleton))
+    at = working1.world_to_cell(skeleton1)
+    assert cleaned[at[:, 0], at[:, 1]].all()
+    assert np.mean(cells_of(skeleton1, working1) == FREE) >= 0.99
     # Map 2's skeleton is drawn where the answer puts it: on map 2's free space.
     skeleton2 = only(recording, "/merge/skeleton/map2", "Points2D:positions")
     assert result.transform is not None
     back = transform_points(inverse(result.transform), np.asarray(skeleton2, dtype=np.float64))
     assert np.mean(cells_of(back, result.trace.working2) == FREE) >= 0.999
-    # One strip per virtual run, through its poses, on map 1's free space.
+    # One strip per virtual run, through its poses, on map 1's cleaned free space.
     runs = result.trace.hypotheses.runs
     strips = only(recording, "/merge/virtual_robot/path", "LineStrips2D:strips")
     assert len(strips) == len(runs) >= 2
-    on_free = []
+    on_free, on_cleaned = [], []
     for strip, run in zip(strips, runs, strict=True):
         np.testing.assert_allclose(strip, run.poses_in_map1[:, :2], atol=1e-5)
-        on_free.extend(cells_of(np.asarray(strip, dtype=np.float64), working1) == FREE)
-    assert all(on_free)
+        points = np.asarray(strip, dtype=np.float64)
+        on_free.extend(cells_of(points, working1) == FREE)
+        at = working1.world_to_cell(points)
+        on_cleaned.extend(cleaned[at[:, 0], at[:, 1]])
+    assert all(on_cleaned)
+    assert np.mean(on_free) >= 0.99
 
 
 def test_virtual_scans_hit_map1_walls(merged: Logged) -> None:

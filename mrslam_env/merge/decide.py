@@ -49,7 +49,7 @@ __all__ = [
     "judge",
     "refute",
     "rule_confident_fit",
-    "rule_correlation_covers_enough",
+    "rule_covers_enough",
     "rule_has_candidates",
     "rule_small_overlap_fits_tightly",
     "rule_unambiguous",
@@ -318,34 +318,26 @@ def rule_unambiguous(candidates: Candidates, config: MergeConfig) -> str | None:
     )
 
 
-def rule_correlation_covers_enough(candidates: Candidates, config: MergeConfig) -> str | None:
-    """A best candidate that only the wall correlation proposed (no confident candidate
-    of another source, the virtual robot or the aliasing check, is the same answer)
-    overlaps at least ``min_correlation_overlap`` of the smaller map's known cells (a
-    fraction).
+def rule_covers_enough(candidates: Candidates, config: MergeConfig) -> str | None:
+    """The best candidate overlaps at least ``min_overlap_fraction`` of the smaller map's
+    known cells (a fraction), whichever source proposed it.
 
-    The correlation tries every translation at every wall-aligned rotation, so a chance fit
-    of a small piece of a repetitive building is far likelier among its proposals than
-    among the virtual robot's. Chosen on: the merge benchmark's seed-1 set (the overlap
-    of chance fits on no-overlap pairs against that of true small overlaps). Confirmed
-    on: the seed-0 set (no success lost, no wrong answer).
+    A chance fit of a small piece of a repetitive building (a maze corridor, the next
+    shelf aisle, a room onto a similar room) agrees almost everywhere on the little it
+    covers. The wall correlation tries every translation at every wall-aligned rotation,
+    so such fits are likeliest among its proposals, but the virtual robot finds them too
+    (how often depends on where its runs start, which the working grid's extent changes):
+    the rule judges the candidate, not its source. Chosen on: the merge benchmark's seed-1
+    set, for the correlation's proposals (the overlap of chance fits on no-overlap pairs,
+    10–14 %, against that of true small overlaps, 23–44 %). Made independent of the source
+    and confirmed on: the seed-0 built-in set and the real-building set (docs/decisions.md).
     """
     best = candidates.hypotheses[0]
-    if best.proposed_by != "correlation":
-        return None
-    if best.agreement.overlap_fraction >= config.min_correlation_overlap:
-        return None
-    if any(
-        o.confident
-        and o.proposed_by != "correlation"
-        and same_answer(best.map1_from_map2, o.map1_from_map2, candidates.pivot, config)
-        for o in candidates.hypotheses[1:]
-    ):
+    if best.agreement.overlap_fraction >= config.min_overlap_fraction:
         return None
     return (
-        "only the wall correlation proposes the best transform and it overlaps "
-        f"{best.agreement.overlap_fraction:.0%} of the smaller map "
-        f"(< {config.min_correlation_overlap:.0%})"
+        f"the best transform overlaps {best.agreement.overlap_fraction:.0%} of the smaller "
+        f"map (< {config.min_overlap_fraction:.0%})"
     )
 
 
@@ -374,7 +366,7 @@ RULES: tuple[Callable[[Candidates, MergeConfig], str | None], ...] = (
     rule_has_candidates,
     rule_confident_fit,
     rule_unambiguous,
-    rule_correlation_covers_enough,
+    rule_covers_enough,
     rule_small_overlap_fits_tightly,
 )
 """The decision rules in the order :func:`decide` applies them. Each returns why it

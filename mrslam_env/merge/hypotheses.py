@@ -718,7 +718,11 @@ def _local_maxima(score: FloatArray, radius_cells: int, count: int) -> list[tupl
 
 
 def correlation_hypotheses(
-    m1: GridMap, m2: GridMap, config: CorrelationConfig | None = None
+    m1: GridMap,
+    m2: GridMap,
+    config: CorrelationConfig | None = None,
+    *,
+    rotations: list[float] | None = None,
 ) -> list[Hypothesis]:
     """``map1_from_map2`` placements by correlating walls (a proposal source besides the
     virtual robot).
@@ -735,6 +739,9 @@ def correlation_hypotheses(
     m1, m2 : GridMap
         The maps, same resolution.
     config : CorrelationConfig, optional
+    rotations : list of float, optional
+        The rotations (rad) to try instead of those of :func:`relative_rotations` (e.g.
+        the Hough spectrum's, :func:`~mrslam_env.merge.spectrum.hough_rotations`).
 
     Returns
     -------
@@ -770,11 +777,13 @@ def correlation_hypotheses(
     spectrum_occupied1 = scipy_fft.rfft2(occupied1.astype(np.float64), shape)
     radius = max(1, round(config.min_peak_distance / resolution))
     found: list[tuple[float, FloatArray]] = []
-    histogram1 = wall_orientation_histogram(m1, config.orientation_smoothing)
-    histogram2 = wall_orientation_histogram(m2, config.orientation_smoothing)
-    for theta in relative_rotations(
-        histogram1, histogram2, config.orientation_peaks, config.peak_separation
-    ):
+    if rotations is None:
+        histogram1 = wall_orientation_histogram(m1, config.orientation_smoothing)
+        histogram2 = wall_orientation_histogram(m2, config.orientation_smoothing)
+        rotations = relative_rotations(
+            histogram1, histogram2, config.orientation_peaks, config.peak_separation
+        )
+    for theta in rotations:
         rotation = np.array([0.0, 0.0, theta])
         occupied2r, free2r, origin2 = _coarse_classes(
             transform_points(rotation, free2).reshape(-1, 2),

@@ -19,9 +19,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mrslam_env.geometry import compose, inverse, transform_points, wrap_scalar
-from mrslam_env.gridmap import GridMap
+from mrslam_env.gridmap import GridMap, crop_to_known
 from mrslam_env.merge.fuse import fuse_maps, resample_map
-from mrslam_env.merge.pipeline import MergeConfig, MergeResult, merge_maps
+from mrslam_env.merge.pipeline import KNOWN_MARGIN, MergeConfig, MergeResult, merge_maps
 from mrslam_env.validation import check_fields
 
 __all__ = ["MultiMergeConfig", "MultiMergeResult", "merge_many"]
@@ -59,7 +59,8 @@ class MultiMergeResult:
     inconsistent : list of (int, int)
         Confident edges outside the tree that contradict it.
     fused : GridMap
-        Map 0 with every joined map fused in, at map 0's resolution.
+        Map 0 with every joined map fused in, on map 0's lattice at its resolution (with
+        ``merge.crop_to_known``, the default, spanning their known areas).
     """
 
     transforms: list[FloatArray | None]
@@ -154,11 +155,14 @@ def merge_many(
             or turn > config.cycle_rotation
         ):
             inconsistent.append((i, j))
-    fused = maps[0]
+    # As in merge_maps: with crop_to_known, the known parts are fused (unknown padding
+    # neither widens the fused map nor costs memory).
+    parts = [crop_to_known(m, KNOWN_MARGIN) if config.merge.crop_to_known else m for m in maps]
+    fused = parts[0]
     for k in range(1, n):
         transform = transforms[k]
         if transform is not None:
-            fused = fuse_maps(fused, resample_map(maps[k], fused.resolution), transform)
+            fused = fuse_maps(fused, resample_map(parts[k], fused.resolution), transform)
     return MultiMergeResult(
         transforms=transforms, pairs=pairs, tree=tree, inconsistent=inconsistent, fused=fused
     )

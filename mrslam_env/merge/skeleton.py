@@ -319,7 +319,9 @@ def skeletonize_free_space(
     Returns
     -------
     ndarray of bool, shape grid.shape
-        Skeleton pixels (a subset of the FREE cells); empty when nothing is free. Not yet
+        Skeleton pixels, a subset of the cleaned free space (:func:`clean_free_space`:
+        the FREE cells plus the small enclosed holes and specks it fills, so a skeleton
+        may cross a noise speck of OCCUPIED cells); empty when nothing is free. Not yet
         pruned: see :func:`prune_spurs`.
     """
     free = clean_free_space(

@@ -52,7 +52,7 @@ Each is ``(m1, m2, rng) -> map1_from_map2 (3,) or None`` (None = "no confident m
                  acceptance index reaches :attr:`RandomWalkBaselineConfig.acceptance_threshold`
 ``features``     ROS ``multirobot_map_merge`` (:mod:`scenarios.bench.merge.features`; needs the
                  ``baselines`` extra, i.e. OpenCV)
-``ours-crop``    ours with ``MergeConfig(crop_to_known=True)``
+``ours-nocrop``  ours with ``MergeConfig(crop_to_known=False)`` (the default until issue 21)
 ``hough``        Carpin's Hough-spectrum merger (:mod:`scenarios.bench.merge.hough`); it
                  answers every pair
 

@@ -17,8 +17,9 @@ benchmark (method ``hough``).
 5. The (rotation, translation) with the highest correlation wins, optionally polished by
    the random walk (:func:`~mrslam_env.merge.refine.refine_random_walk`).
 
-It answers every pair (no acceptance test), which is its known weakness: a pair without
-overlap still gets a transform.
+Steps 1-3 are :mod:`mrslam_env.merge.spectrum`, which the merge pipeline also uses as a
+proposal source. It answers every pair (no acceptance test), which is its known
+weakness: a pair without overlap still gets a transform.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from scipy.ndimage import gaussian_filter
 from scipy.signal import fftconvolve
 
 from mrslam_env.gridmap import GridMap
+from mrslam_env.merge.spectrum import hough_spectrum, occupied_points, spectrum_rotations
 from mrslam_env.validation import check_fields
 
 FloatArray = NDArray[np.float64]
@@ -72,48 +74,6 @@ class HoughResult:
     score: float
 
 
-def _occupied_points(grid: GridMap, resolution: float) -> FloatArray:
-    """Centres of the occupied cells, thinned to one point per ``resolution`` cell."""
-    points = grid.cell_to_world(np.argwhere(grid.occupied))
-    if resolution <= grid.resolution or len(points) == 0:
-        return points
-    keys = np.unique(np.floor(points / resolution).astype(np.int64), axis=0)
-    return np.asarray((keys + 0.5) * resolution, dtype=np.float64)
-
-
-def hough_spectrum(points: FloatArray, angles: int, rho_step: float) -> FloatArray:
-    """Carpin's Hough spectrum ``S(theta_k) = sum_rho H(rho, theta_k)²`` for
-    ``theta_k = k pi / angles``, normalised to a maximum of 1 (zeros without points)."""
-    spectrum = np.zeros(angles)
-    if len(points) == 0:
-        return spectrum
-    centred = points - points.mean(axis=0)
-    thetas = np.arange(angles) * math.pi / angles
-    rho = centred @ np.vstack([np.cos(thetas), np.sin(thetas)])  # (points, angles)
-    bins = np.floor(rho / rho_step).astype(np.int64)
-    bins -= bins.min()
-    width = int(bins.max()) + 1
-    flat = bins + width * np.arange(angles)[None, :]
-    counts = np.bincount(flat.ravel(), minlength=width * angles).reshape(angles, width)
-    spectrum = (counts.astype(np.float64) ** 2).sum(axis=1)
-    peak = spectrum.max()
-    return spectrum / peak if peak > 0 else spectrum
-
-
-def _rotation_candidates(s1: FloatArray, s2: FloatArray, count: int) -> list[float]:
-    """Rotations theta (rad, in [0, pi)) with ``S1(phi) ~ S2(phi + theta)``: the highest
-    local maxima of the circular cross-correlation."""
-    n = len(s1)
-    correlation = np.real(np.fft.ifft(np.conj(np.fft.fft(s1)) * np.fft.fft(s2)))
-    peaks = [
-        k
-        for k in range(n)
-        if correlation[k] >= correlation[k - 1] and correlation[k] >= correlation[(k + 1) % n]
-    ]
-    peaks.sort(key=lambda k: -correlation[k])
-    return [k * math.pi / n for k in peaks[:count]]
-
-
 def _raster(
     points: FloatArray, lower: FloatArray, shape: tuple[int, int], step: float
 ) -> FloatArray:
@@ -152,14 +112,14 @@ def estimate_transform_hough(
     has no occupied cell."""
     config = config if config is not None else HoughConfig()
     step = max(config.resolution, m1.resolution, m2.resolution)
-    points1 = _occupied_points(m1, step)
-    points2 = _occupied_points(m2, step)
+    points1 = occupied_points(m1, step)
+    points2 = occupied_points(m2, step)
     if len(points1) == 0 or len(points2) == 0:
         return HoughResult(None, 0.0)
     s1 = hough_spectrum(points1, config.angles, step)
     s2 = hough_spectrum(points2, config.angles, step)
     best: tuple[float, FloatArray] = (-math.inf, np.zeros(3))
-    for base in _rotation_candidates(s1, s2, config.rotation_candidates):
+    for base in spectrum_rotations(s1, s2, config.rotation_candidates):
         for theta in (base, base + math.pi):
             # the spectrum of map 2 is map 1's shifted by -theta: rotate map 2 back by it
             rotation = -theta

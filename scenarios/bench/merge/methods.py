@@ -1,4 +1,4 @@
-"""The merge methods the benchmark compares: ours (also with ``crop_to_known``), the random
+"""The merge methods the benchmark compares: ours (also without ``crop_to_known``), the random
 walk alone, ROS features, Carpin's Hough spectrum."""
 
 from __future__ import annotations
@@ -82,10 +82,11 @@ class PipelineMethod:
     """The project's pipeline, :func:`mrslam_env.merge.pipeline.merge_maps`, as a method;
     :meth:`answer` also gives every candidate it judged (for the proposal recall).
 
-    ``crop_to_known`` sets :attr:`~mrslam_env.merge.pipeline.MergeConfig.crop_to_known`.
+    ``crop_to_known`` sets :attr:`~mrslam_env.merge.pipeline.MergeConfig.crop_to_known`
+    (None: the default configuration).
     """
 
-    crop_to_known: bool = False
+    crop_to_known: bool | None = None
 
     def __call__(self, m1: GridMap, m2: GridMap, rng: np.random.Generator) -> FloatArray | None:
         return self.answer(m1, m2, rng)[0]
@@ -97,7 +98,9 @@ class PipelineMethod:
         transform and its proposal before refinement (confident or not)."""
         from mrslam_env.merge.pipeline import MergeConfig, merge_maps
 
-        config = MergeConfig(crop_to_known=True) if self.crop_to_known else None
+        config = (
+            None if self.crop_to_known is None else MergeConfig(crop_to_known=self.crop_to_known)
+        )
         result = merge_maps(m1, m2, config, rng=rng)
         candidates = [
             np.asarray(transform, dtype=np.float64)
@@ -110,8 +113,8 @@ class PipelineMethod:
 
 method_ours = PipelineMethod()
 """The project's pipeline with its default configuration."""
-method_ours_crop = PipelineMethod(crop_to_known=True)
-"""The pipeline with ``MergeConfig(crop_to_known=True)``."""
+method_ours_nocrop = PipelineMethod(crop_to_known=False)
+"""The pipeline with ``MergeConfig(crop_to_known=False)`` (the default until issue 21)."""
 
 
 def _random_initial_transform(m1: GridMap, m2: GridMap, rng: np.random.Generator) -> FloatArray:
@@ -210,7 +213,7 @@ def method_hough(m1: GridMap, m2: GridMap, rng: np.random.Generator) -> FloatArr
 
 _METHODS: dict[str, tuple[MergeMethod, tuple[str, ...]]] = {
     "ours": (method_ours, ("mrslam_env.merge.pipeline",)),
-    "ours-crop": (method_ours_crop, ("mrslam_env.merge.pipeline",)),
+    "ours-nocrop": (method_ours_nocrop, ("mrslam_env.merge.pipeline",)),
     "random-walk": (
         method_random_walk,
         ("mrslam_env.merge.refine", "mrslam_env.merge.dissimilarity"),

@@ -2,16 +2,16 @@
 
 Variants
 --------
-Besides the plain pair, ``ours`` and ``ours-crop`` can run on transformed copies of it, the
+Besides the plain pair, ``ours`` and ``ours-nocrop`` can run on transformed copies of it, the
 situations users meet with real map files (rows of method ``ours+<variant>``,
-``ours-crop+<variant>``, scored against the variant's own truth):
+``ours-nocrop+<variant>``, scored against the variant's own truth):
 
 ``pad4000``  map 2 placed in a 4000 x 4000 all-UNKNOWN grid (same world position), as
              ``map_server`` maps padded to a fixed size are
 ``yaw``      map 2 saved with origin yaw :data:`VARIANT_YAW` and read back by
-             :func:`~mrslam_env.mapio.load_map` (which ignores the yaw with a warning); the
-             truth is the file's frame, in which the grid is rotated by the yaw about the
-             origin corner (the ROS meaning)
+             :func:`~mrslam_env.mapio.load_map` (which turns the grid into the file's
+             frame); the truth is the file's frame, in which the grid is rotated by the
+             yaw about the origin corner (the ROS meaning)
 ``res``      map 2 at another resolution (:func:`~mrslam_env.merge.fuse.resample_map`):
              0.1 m for a map finer than 0.1 m, else 0.05 m
 
@@ -29,7 +29,6 @@ from __future__ import annotations
 import math
 import tempfile
 import time
-import warnings
 import zlib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -37,7 +36,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 
 from mrslam_env.evaluation import cell_agreement, relative_transform_error
@@ -90,24 +88,15 @@ def pad_grid(grid: GridMap, side: int = PAD_CELLS) -> GridMap:
     return GridMap(cells=cells, resolution=grid.resolution, origin=origin)
 
 
-def yaw_variant(pair: MergePair, yaw: float = VARIANT_YAW) -> tuple[MergePair, bool]:
-    """Map 2 written with origin yaw ``yaw`` and read back by :func:`load_map`; the truth is
-    the file's frame. Also whether the reader warned."""
-    from mrslam_env.mapio import load_map, save_map
+def yaw_variant(pair: MergePair, yaw: float = VARIANT_YAW) -> MergePair:
+    """Map 2 written with origin yaw ``yaw`` and read back by :func:`load_map` (which turns
+    the grid into the file's frame); the truth is the file's frame."""
+    from mrslam_env.mapio import load_map, map_frame_from_lattice, save_map
 
     with tempfile.TemporaryDirectory() as folder:
-        path = save_map(Path(folder) / "m2.yaml", pair.m2)
-        x0, y0 = pair.m2.origin
-        document = yaml.safe_load(path.read_text())
-        document["origin"] = [x0, y0, float(yaw)]
-        path.write_text(yaml.safe_dump(document, sort_keys=False))
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            grid = load_map(path)
-    file_from_read = compose(np.array([x0, y0, yaw]), inverse(np.array([x0, y0, 0.0])))
-    truth = compose(pair.map1_from_map2, inverse(file_from_read))
-    warned = any(issubclass(w.category, UserWarning) for w in caught)
-    return replace(pair, m2=grid, map1_from_map2=truth), warned
+        grid = load_map(save_map(Path(folder) / "m2.yaml", pair.m2, yaw=yaw))
+    truth = compose(pair.map1_from_map2, inverse(map_frame_from_lattice(pair.m2, yaw)))
+    return replace(pair, m2=grid, map1_from_map2=truth)
 
 
 def resolution_variant(pair: MergePair) -> MergePair:
@@ -127,8 +116,7 @@ def make_variant(pair: MergePair, name: str) -> tuple[MergePair, dict[str, Any]]
     if name == "pad4000":
         return replace(pair, m2=pad_grid(pair.m2)), {}
     if name == "yaw":
-        changed, warned = yaw_variant(pair)
-        return changed, {"variant_yaw": VARIANT_YAW, "variant_warned": warned}
+        return yaw_variant(pair), {"variant_yaw": VARIANT_YAW}
     if name == "res":
         changed = resolution_variant(pair)
         return changed, {"variant_resolution": changed.m2.resolution}
@@ -177,7 +165,7 @@ def run_merge_benchmark(
     no_overlap_max: float = 0.02,
     warm_up: bool = True,
     variants: Sequence[str] = (),
-    variant_methods: Sequence[str] = ("ours", "ours-crop"),
+    variant_methods: Sequence[str] = ("ours", "ours-nocrop"),
     progress: Callable[[str], None] | None = None,
 ) -> list[dict[str, Any]]:
     """Run every method on every pair; one row (dict) per (pair, method).
