@@ -139,3 +139,24 @@ def test_rllib_example_saves_a_shared_module_that_acts(tmp_path: Path) -> None:
     actions = np.asarray(distribution.to_deterministic().sample())
     assert actions.shape == (2, 2) and np.all(np.isfinite(actions))
     assert not np.array_equal(actions[0], actions[1])  # the robots see different things
+
+
+def test_a_trained_sb3_policy_explores_in_bench_explore_beside_the_frontier_baseline(
+    sb3_model: tuple[Path, str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from scenarios.bench.explore import format_explore_table, run_explore_benchmark
+
+    path, _ = sb3_model
+    monkeypatch.setenv("MRSLAM_SB3_MODEL", str(path))
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    rows, runs = run_explore_benchmark(
+        ["office"],
+        range(1),
+        60,
+        modes=("team",),
+        policy=f"{EXAMPLES / 'sb3_policy.py'}:sb3_policy",
+    )
+    assert [row["policy"] for row in rows] == ["frontier", "sb3_policy:sb3_policy"]
+    assert [run["policy"] for run in runs] == ["frontier", "sb3_policy:sb3_policy"]
+    assert all(run["steps"] == 60 for run in runs)  # both ran to the step limit
+    assert "sb3_policy:sb3_policy" in format_explore_table(rows)
