@@ -262,6 +262,18 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     merge.add_argument("--regenerate", action="store_true", help="rebuild the cached pairs")
     merge.add_argument(
+        "--jobs", type=int, default=1, help="worlds simulated at a time for new pairs (default 1)"
+    )
+    merge.add_argument(
+        "--ray",
+        nargs="?",
+        const="",
+        metavar="ADDRESS",
+        help="simulate new pairs' worlds as Ray tasks: alone, on a local Ray instance of --jobs "
+        "CPUs; with an ADDRESS, on that cluster (the merges themselves run here, timed one at "
+        "a time)",
+    )
+    merge.add_argument(
         "--cache",
         type=Path,
         default=Path("runs") / "bench-merge-pairs",
@@ -623,6 +635,8 @@ def _cmd_bench_merge(args: argparse.Namespace) -> int:
     from scenarios.bench.merge.run import VARIANTS, run_merge_benchmark
     from scenarios.bench.merge.twins import load_or_compute_world_twins
 
+    if args.jobs < 1:
+        raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
     names = [name.strip() for name in args.methods.split(",") if name.strip()]
     if not names:
         raise ValueError("--methods names no method")
@@ -664,7 +678,12 @@ def _cmd_bench_merge(args: argparse.Namespace) -> int:
     results = []
     for title, config, set_variants in sets:
         pairs, manifest = load_or_generate_pairs(
-            config, args.cache, regenerate=args.regenerate, progress=progress
+            config,
+            args.cache,
+            regenerate=args.regenerate,
+            progress=progress,
+            jobs=args.jobs,
+            ray=args.ray,
         )
         rows = run_merge_benchmark(
             pairs, methods, seed=args.seed, variants=set_variants, progress=progress

@@ -259,7 +259,7 @@ def test_features_baseline_refuses_unrelated_maps() -> None:
 def test_cli_bench_merge_prints_the_table_and_writes_rows(tmp_path, monkeypatch, capsys) -> None:
     pairs = synthetic_pairs()
 
-    def load(config, cache, *, regenerate=False, progress=None):
+    def load(config, cache, *, regenerate=False, progress=None, jobs=1, ray=None):
         assert config.n_pairs == 4 and config.seed == 5 and cache == tmp_path
         return pairs, {"generation_seconds": 1.5, "shortfall": 0}
 

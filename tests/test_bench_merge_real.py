@@ -189,7 +189,7 @@ def test_variant_rows_and_proposal_recall() -> None:
 def test_cli_custom_set_from_names_and_maps(tmp_path, monkeypatch, capsys) -> None:
     seen = []
 
-    def load(config, cache, *, regenerate=False, progress=None):
+    def load(config, cache, *, regenerate=False, progress=None, jobs=1, ray=None):
         seen.append(config)
         pairs = [pair(), pair("001-map-plant", "map:plant", overlap=0.5)]
         return pairs, {"generation_seconds": 1.0, "shortfall": 0}
@@ -212,7 +212,7 @@ def test_cli_custom_set_from_names_and_maps(tmp_path, monkeypatch, capsys) -> No
 def test_cli_default_reports_both_sets_side_by_side(tmp_path, monkeypatch, capsys) -> None:
     seen = []
 
-    def load(config, cache, *, regenerate=False, progress=None):
+    def load(config, cache, *, regenerate=False, progress=None, jobs=1, ray=None):
         seen.append(config)
         if config.worlds == merge_pairs.DEFAULT_WORLDS:
             return [pair("000-office", "office")], {"generation_seconds": 1.0, "shortfall": 0}

@@ -12,6 +12,7 @@ from typing import Any
 import pytest
 
 from scenarios.bench.explore import format_explore_table, run_explore_benchmark, summarise_reports
+from scenarios.bench.merge.pairs import PairGenerationConfig, generate_pairs
 from scenarios.cli import main
 from scenarios.sweep import run_tasks
 
@@ -113,3 +114,34 @@ def test_a_folder_without_reports_is_one_clear_error(tmp_path: Path) -> None:
     (tmp_path / "reports" / "x.json").write_text("{}", encoding="utf-8")
     with pytest.raises(ValueError, match="not a bench explore run report"):
         summarise_reports(tmp_path)
+
+
+# --- bench merge: the same pairs simulated one world at a time, in processes, on Ray ------
+
+PAIRS = PairGenerationConfig(
+    n_pairs=3,
+    worlds=("maze", "office"),
+    runs_per_world=2,
+    checkpoints=(40, 100),
+    no_overlap_fraction=0.34,
+    min_known_area=1.0,
+)
+
+
+def _generated(folder: Path, **engine: Any) -> tuple[dict[str, Any], list[bytes]]:
+    generate_pairs(PAIRS, folder, **engine)
+    manifest = json.loads((folder / "manifest.json").read_text(encoding="utf-8"))
+    manifest.pop("generation_seconds")
+    maps = [(folder / e[key]).read_bytes() for e in manifest["pairs"] for key in ("map1", "map2")]
+    return manifest, maps
+
+
+def test_pairs_are_the_same_from_the_pool_and_from_ray(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    serial = _generated(tmp_path / "serial")
+    assert serial[0]["pairs"], "the tiny set made no pair"
+    assert _generated(tmp_path / "pool", jobs=2) == serial
+    pytest.importorskip("ray")
+    monkeypatch.setenv("TMPDIR", "/tmp")
+    assert _generated(tmp_path / "ray", jobs=2, ray="") == serial

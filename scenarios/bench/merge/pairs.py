@@ -28,6 +28,7 @@ from mrslam_env.sim.world import WorldSpec, ground_truth_map
 from mrslam_env.slam.config import SlamConfig
 from mrslam_env.slam.slam import RobotSlam
 from mrslam_env.validation import check_fields, require
+from scenarios.sweep import run_tasks
 
 FloatArray = NDArray[np.float64]
 
@@ -177,12 +178,6 @@ class PairGenerationConfig:
             return base
         resolution = load_map(path).resolution
         return replace(base, grid=replace(base.grid, resolution=resolution))
-
-    def build_worlds(self) -> list[WorldSpec]:
-        """The worlds in :meth:`labels` order."""
-        return [build_world(name) for name in self.worlds] + [
-            world_from_map_file(path) for path in self.maps
-        ]
 
 
 def _file_digest(path: Path) -> str:
@@ -387,6 +382,13 @@ def _world_snapshots(
     return snapshots
 
 
+def _world_task(task: tuple[PairGenerationConfig, int, str]) -> list[_Snapshot]:
+    """The snapshots of one world (a sweep task: seeded by the world's index, so the same
+    whichever process or Ray worker runs it)."""
+    config, world_index, label = task
+    return _world_snapshots(config.world(label), world_index, config, label)
+
+
 def _candidates(
     snapshots: list[_Snapshot],
 ) -> list[tuple[int, int, float]]:
@@ -435,8 +437,14 @@ def generate_pairs(
     out_dir: Path,
     *,
     progress: Callable[[str], None] | None = None,
+    jobs: int = 1,
+    ray: str | None = None,
 ) -> list[MergePair]:
     """Simulate the runs, choose the pairs, and save them (maps + ``manifest.json``).
+
+    The worlds' runs are simulated one world after the other, or, with ``jobs`` > 1 or
+    ``ray`` (:func:`scenarios.sweep.run_tasks`), one world per process or Ray task; the
+    pairs are the same either way.
 
     Slots that their world cannot fill (e.g. no pair of runs without overlap) are filled
     from the nearest bin of the same kind in that world, then from the same bin in the other
@@ -446,11 +454,17 @@ def generate_pairs(
     snapshots: list[list[_Snapshot]] = []
     candidates: list[list[tuple[int, int, float]]] = []
     labels = config.labels()
-    for w, spec in enumerate(config.build_worlds()):
+    tasks = [(config, w, label) for w, label in enumerate(labels)]
+    if jobs == 1 and ray is None:
+        for task in tasks:
+            if progress is not None:
+                progress(f"simulating {config.runs_per_world} runs in {task[2]}")
+            snapshots.append(_world_task(task))
+    else:
         if progress is not None:
-            progress(f"simulating {config.runs_per_world} runs in {labels[w]}")
-        snapshots.append(_world_snapshots(spec, w, config, labels[w]))
-        candidates.append(_candidates(snapshots[-1]))
+            progress(f"simulating {config.runs_per_world} runs in each of {', '.join(labels)}")
+        snapshots = run_tasks(_world_task, tasks, jobs=jobs, ray=ray)
+    candidates = [_candidates(found) for found in snapshots]
     rng = np.random.default_rng([config.seed, 7919])
     used: set[tuple[int, int, int]] = set()
     run_pair_uses: dict[tuple[int, int, int], int] = {}
@@ -586,13 +600,15 @@ def load_or_generate_pairs(
     *,
     regenerate: bool = False,
     progress: Callable[[str], None] | None = None,
+    jobs: int = 1,
+    ray: str | None = None,
 ) -> tuple[list[MergePair], dict[str, Any]]:
     """The cached pairs of this configuration, generating them first when missing (or
-    when ``regenerate``)."""
+    when ``regenerate``; ``jobs`` and ``ray`` as in :func:`generate_pairs`)."""
     folder = Path(cache) / config.cache_key()
     manifest_path = folder / "manifest.json"
     if regenerate or not manifest_path.exists():
         if progress is not None:
             progress(f"generating {config.n_pairs} pairs into {folder}")
-        generate_pairs(config, folder, progress=progress)
+        generate_pairs(config, folder, progress=progress, jobs=jobs, ray=ray)
     return load_pairs(folder)
