@@ -46,8 +46,7 @@ from agents.planning import (
 from agents.policy import PolicyContext
 from mrslam_env.config import EnvConfig
 from mrslam_env.geometry import compose, transform_points, world_to_cell
-from mrslam_env.gridmap import OCCUPIED, GridMap
-from mrslam_env.slam.grid import trusted_gridmap
+from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.slam.scan import mask_returns_near, sighted_positions
 from mrslam_env.validation import check_fields, require
 
@@ -637,8 +636,7 @@ class ExplorerPolicy:
             return grid
         marked = grid.cells.copy()
         marked[cells[:, 0], cells[:, 1]] = OCCUPIED
-        # A valid map with cells set OCCUPIED needs no value check.
-        return trusted_gridmap(marked, grid.resolution, grid.origin)
+        return GridMap(cells=marked, resolution=grid.resolution, origin=grid.origin)
 
     def _clearance(self, scan: Any) -> tuple[float, float] | None:
         if scan is None:
@@ -736,7 +734,7 @@ class ExplorerPolicy:
         cells = cells.reshape(-1, 2)
         inside = grid.contains(cells)
         cells = cells[inside]
-        if grid.occupied[cells[:, 0], cells[:, 1]].any():
+        if (grid.cells[cells[:, 0], cells[:, 1]] == OCCUPIED).any():  # not the whole grid
             return True
         # Known teammates are already in the grid planning sees; sighted robots are not.
         robots = self._robots_in_the_way()
@@ -755,13 +753,13 @@ class ExplorerPolicy:
         if not inside.any():
             return False
         cells = cells[inside]
-        free = grid.free[cells[:, 0], cells[:, 1]]
+        free = grid.cells[cells[:, 0], cells[:, 1]] == FREE  # the cells', not the whole grid's
         near_unknown = np.zeros(len(cells), dtype=bool)
         for d_row, d_col in ((1, 0), (-1, 0), (0, 1), (0, -1)):
             neighbours = cells + np.array([d_row, d_col])
             outside = ~grid.contains(neighbours)
             neighbours = np.clip(neighbours, 0, [rows - 1, cols - 1])
-            near_unknown |= outside | grid.unknown[neighbours[:, 0], neighbours[:, 1]]
+            near_unknown |= outside | (grid.cells[neighbours[:, 0], neighbours[:, 1]] == UNKNOWN)
         still = free & near_unknown
         return bool(still.sum() < self.config.target_gone_fraction * len(self._target_cells))
 

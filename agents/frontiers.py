@@ -24,6 +24,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
@@ -185,11 +186,54 @@ def frontier_cells(
         # Single beams through gaps leave one-cell-wide streaks of FREE in unknown space
         # (often outside the building): no place to go, and all frontier along their length.
         width = config.min_free_width
-        free = ndimage.binary_opening(free, structure=np.ones((width, width), dtype=bool))
+        if width % 2:
+            free = _open_square(free, width // 2)
+        else:
+            free = ndimage.binary_opening(free, structure=np.ones((width, width), dtype=bool))
     cells = free & near_unknown
     if reachable is not None:
         cells &= _near_reachable(reachable, grid.resolution, config.max_goal_offset)
     return cells
+
+
+@numba.njit(cache=True)
+def _open_square(mask: BoolArray, half: int) -> BoolArray:
+    """Morphological opening by a ``(2 * half + 1)``-square (cells outside are False):
+    ``ndimage.binary_opening`` with that structure, by running counts in one pass each."""
+    rows, cols = mask.shape
+    # Erosion: a cell survives when the whole square around it is True and inside.
+    across = np.zeros((rows, cols), dtype=np.bool_)
+    for r in range(rows):
+        run = 0
+        for c in range(cols):
+            run = run + 1 if mask[r, c] else 0
+            if run >= 2 * half + 1 and c - half >= half:
+                across[r, c - half] = True
+    eroded = np.zeros((rows, cols), dtype=np.bool_)
+    for c in range(cols):
+        run = 0
+        for r in range(rows):
+            run = run + 1 if across[r, c] else 0
+            if run >= 2 * half + 1:
+                eroded[r - half, c] = True
+    # Dilation: a cell is True when a surviving cell lies within the square around it.
+    grown = np.zeros((rows, cols), dtype=np.bool_)
+    for r in range(rows):
+        last = -(10**9)
+        for c in range(cols + half):
+            if c < cols and eroded[r, c]:
+                last = c
+            if c - half >= 0 and c - last <= 2 * half:
+                grown[r, c - half] = True
+    opened = np.zeros((rows, cols), dtype=np.bool_)
+    for c in range(cols):
+        last = -(10**9)
+        for r in range(rows + half):
+            if r < rows and grown[r, c]:
+                last = r
+            if r - half >= 0 and r - last <= 2 * half:
+                opened[r - half, c] = True
+    return opened
 
 
 def _near_reachable(reachable: BoolArray, resolution: float, distance: float) -> BoolArray:
@@ -346,7 +390,6 @@ def connected_information_gain(
     gains = np.zeros(count)
     if count == 0:
         return gains
-    rows, cols = grid.shape
     unknown = np.pad(grid.unknown, 1, constant_values=True)
     regions, region_count = ndimage.label(unknown)
     outside = regions[0, 0]
@@ -364,16 +407,39 @@ def connected_information_gain(
     half = max(round(sensor_range / grid.resolution), 0)
     box = (2 * half + 1) ** 2
     centres = grid.world_to_cell(points) + 1  # padded coordinates
+    counts, sizes = _touched_in_squares(regions, touches, centres, half)
     for frontier in range(count):
-        row, col = centres[frontier]
-        r0, r1 = max(row - half, 0), min(row + half + 1, rows + 2)
-        c0, c1 = max(col - half, 0), min(col + half + 1, cols + 2)
-        window = regions[r0:r1, c0:c1] if r0 < r1 and c0 < c1 else regions[:0, :0]
-        cells = int(touches[frontier][window].sum())
+        cells = int(counts[frontier])
         if outside and touches[frontier, outside]:
-            cells += box - window.size  # the square's part beyond the padded grid
+            cells += box - int(sizes[frontier])  # the square's part beyond the padded grid
         gains[frontier] = cells
     return gains * grid.resolution**2
+
+
+@numba.njit(cache=True)
+def _touched_in_squares(
+    regions: NDArray[np.int32], touches: BoolArray, centres: IntArray, half: int
+) -> tuple[IntArray, IntArray]:
+    """Per frontier ``f``, the cells of the square of half-width ``half`` around
+    ``centres[f]`` (clipped to ``regions``) whose region ``f`` touches, and the number of
+    cells of the clipped square."""
+    rows, cols = regions.shape
+    count = len(centres)
+    counts = np.zeros(count, dtype=np.int64)
+    sizes = np.zeros(count, dtype=np.int64)
+    for f in range(count):
+        r0, r1 = max(centres[f, 0] - half, 0), min(centres[f, 0] + half + 1, rows)
+        c0, c1 = max(centres[f, 1] - half, 0), min(centres[f, 1] + half + 1, cols)
+        if r0 >= r1 or c0 >= c1:
+            continue
+        sizes[f] = (r1 - r0) * (c1 - c0)
+        total = 0
+        for r in range(r0, r1):
+            for c in range(c0, c1):
+                if touches[f, regions[r, c]]:
+                    total += 1
+        counts[f] = total
+    return counts, sizes
 
 
 def _enclosed_regions(
@@ -424,12 +490,15 @@ def _goal_cells(
     valid = np.zeros(count, dtype=bool)
     if count == 0 or not reachable.any():
         return goal_cells, valid
-    distance, nearest = ndimage.distance_transform_edt(~reachable, return_indices=True)
-    distance = distance * resolution
+    nearest = ndimage.distance_transform_edt(
+        ~reachable, return_distances=False, return_indices=True
+    )
     cells = np.argwhere(labels > 0)
     owner = labels[cells[:, 0], cells[:, 1]] - 1
     to_centroid = ((cells + np.asarray(offset) - centroid_cells[owner]) ** 2).sum(axis=1)
-    to_reachable = distance[cells[:, 0], cells[:, 1]]
+    # The distances at the frontier cells only, as the transform computes them everywhere.
+    steps = (nearest[:, cells[:, 0], cells[:, 1]] - cells.T.astype(np.int32)).astype(np.float64)
+    to_reachable = np.sqrt(np.add.reduce(steps * steps, axis=0)) * resolution
     # The middle cell when it is close enough to reachable space, else the closest cell.
     middle_ok = to_reachable <= max_goal_offset
     key = np.where(middle_ok, to_centroid, np.inf)

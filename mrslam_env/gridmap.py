@@ -58,10 +58,10 @@ class GridMap:
             raise ValueError(f"GridMap.cells must be 2-D, got shape {cells.shape}")
         if cells.dtype != np.int8:
             raise ValueError(f"GridMap.cells must be int8, got {cells.dtype}")
-        bad = ~np.isin(cells, (FREE, OCCUPIED, UNKNOWN))
-        if bad.any():
+        row, col = _first_invalid_cell(cells)
+        if row >= 0:
             raise ValueError(
-                f"GridMap.cells holds values other than 0, 100, -1 (e.g. {cells[bad][0]})"
+                f"GridMap.cells holds values other than 0, 100, -1 (e.g. {cells[row, col]})"
             )
         if not (np.isfinite(self.resolution) and self.resolution > 0):
             raise ValueError(f"GridMap.resolution must be > 0 m, got {self.resolution}")
@@ -301,3 +301,15 @@ def _known_box(cells: NDArray[np.int8]) -> tuple[int, int, int, int]:
     if low_row < 0:
         return -1, -1, -1, -1
     return low_row, high_row, low_col, high_col
+
+
+@numba.njit(cache=True)
+def _first_invalid_cell(cells: NDArray[np.int8]) -> tuple[int, int]:
+    """(row, col) of the first cell that is not FREE, OCCUPIED or UNKNOWN, or (-1, -1): one
+    pass with no temporary (the check runs on every map a SLAM hands out)."""
+    for row in range(cells.shape[0]):
+        for col in range(cells.shape[1]):
+            value = cells[row, col]
+            if value != 0 and value != 100 and value != -1:
+                return row, col
+    return -1, -1

@@ -192,6 +192,43 @@ def test_one_explorer_maps_the_office() -> None:
     assert len(policy.frontiers) > 0 and len(policy.plan) > 0
 
 
+def test_the_cut_short_search_plans_as_the_whole_search(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The explorer stops its search once no frontier left can beat the best one reached;
+    # with the whole search instead, the same office run makes the same plans and actions.
+    import agents.explorer as explorer_module
+    from agents.planning import CostGrid, distance_field
+    from mrslam_env.config import EnvConfig
+    from mrslam_env.env import MultiRobotSlamEnv
+
+    def run() -> tuple[list[np.ndarray], list[np.ndarray]]:
+        env = MultiRobotSlamEnv(
+            scenario="office", n_robots=1, seed=1, config=EnvConfig(max_cycles=200)
+        )
+        observations, _ = env.reset()
+        policy = ExplorerPolicy(np.random.default_rng(1))
+        actions, plans = [], []
+        for _ in range(200):
+            action = policy.act(observations["robot_0"], env.robot_map("robot_0"))
+            actions.append(action)
+            plans.append(policy.plan.copy())
+            observations, *_ = env.step({"robot_0": action})
+        assert policy.replans >= 8
+        return actions, plans
+
+    cut_actions, cut_plans = run()
+
+    def whole_search(grid: CostGrid, start: tuple[int, int], *_: object, **__: object) -> object:
+        return distance_field(grid, grid.cell_to_world(np.array(start)), snap_distance=1e-9)
+
+    monkeypatch.setattr(explorer_module, "best_goal_field", whole_search)
+    whole_actions, whole_plans = run()
+    np.testing.assert_array_equal(np.array(cut_actions), np.array(whole_actions))
+    for cut, whole in zip(cut_plans, whole_plans, strict=True):
+        np.testing.assert_array_equal(cut, whole)
+
+
 def test_close_scan_returns_the_map_misses_are_planned_around() -> None:
     # An open room; the scan shows a post 0.5 m ahead of the robot that the map lacks.
     cells = np.full((80, 80), FREE, dtype=np.int8)

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from agents.frontiers import (
     FrontierConfig,
+    _open_square,
     cluster_frontiers,
     connected_information_gain,
     extract_frontiers,
@@ -225,3 +227,15 @@ def test_config_needs_max_size_above_min_size() -> None:
 def test_reachable_mask_of_the_wrong_shape_is_rejected() -> None:
     with pytest.raises(ValueError, match="reachable"):
         extract_frontiers(room_with_door(), reachable=np.ones((3, 3), dtype=bool))
+
+
+@pytest.mark.parametrize("width", [1, 3, 5])
+def test_the_square_opening_is_scipys(width: int) -> None:
+    # The frontier step's own opening (odd widths) against ndimage.binary_opening, on
+    # masks from sparse to dense, touching the border.
+    rng = np.random.default_rng(width)
+    for density in (0.3, 0.6, 0.85, 0.97):
+        for _ in range(25):
+            mask = rng.random((int(rng.integers(1, 30)), int(rng.integers(1, 30)))) < density
+            expected = ndimage.binary_opening(mask, structure=np.ones((width, width), dtype=bool))
+            np.testing.assert_array_equal(_open_square(mask, width // 2), expected)

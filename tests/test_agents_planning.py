@@ -15,11 +15,13 @@ from scipy.sparse.csgraph import dijkstra
 from agents.planning import (
     CostGrid,
     PlannerConfig,
+    best_goal_field,
     distance_field,
     inflate,
     line_is_clear,
     nearest_passable_cell,
     plan_path,
+    reachable_cells,
     shorten_path,
 )
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
@@ -87,6 +89,74 @@ def test_traced_paths_are_connected_and_cost_what_the_field_says(seed: int) -> N
             for step, a, b in zip(steps, path[:-1], path[1:], strict=True)
         )
         assert cost == pytest.approx(field.cost[tuple(goal)], rel=1e-12, abs=1e-12)
+
+
+def random_map(rng: np.random.Generator, rows: int, cols: int) -> GridMap:
+    """Walls in clumps, unknown patches, free elsewhere."""
+    cells = np.full((rows, cols), FREE, dtype=np.int8)
+    cells[ndimage.binary_dilation(rng.random((rows, cols)) < 0.01, iterations=2)] = OCCUPIED
+    cells[ndimage.binary_dilation(rng.random((rows, cols)) < 0.005, iterations=4)] = UNKNOWN
+    cells[rng.random((rows, cols)) < 0.01] = OCCUPIED
+    return GridMap(cells=cells, resolution=RESOLUTION)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_wall_distances_are_scipy_euclidean_distances(seed: int) -> None:
+    # The inflation's own exact transform against scipy's, value for value.
+    rng = np.random.default_rng(40 + seed)
+    grid = random_map(rng, 50 + 7 * seed, 80 - 9 * seed)
+    band = PlannerConfig().blocked_radius + PlannerConfig().clearance
+    costs = inflate(grid, PlannerConfig(clearance=0.0, unknown="costly"))
+    expected = ndimage.distance_transform_edt(grid.cells != OCCUPIED) * RESOLUTION
+    # The cost grid covers the known window grown by the band, the whole of this map.
+    np.testing.assert_array_equal(costs.wall_distance, expected)
+    soft = inflate(grid)
+    near = np.where(expected < band, expected, band)
+    assert np.array_equal(soft.wall_distance < band, near < band)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_reachable_cells_are_the_searched_ones(seed: int) -> None:
+    rng = np.random.default_rng(50 + seed)
+    grid = random_cost_grid(rng, 30, 40)
+    start_point = grid.cell_to_world(np.argwhere(grid.passable)[len(grid.passable) // 3])
+    start, reachable = reachable_cells(grid, start_point, snap_distance=0.01)
+    field = distance_field(grid, start_point, snap_distance=0.01)
+    assert start == field.start
+    np.testing.assert_array_equal(reachable, field.reachable)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_best_goal_field_finds_the_best_goal_with_its_exact_cost_and_path(seed: int) -> None:
+    rng = np.random.default_rng(60 + seed)
+    grid = random_cost_grid(rng, 40, 40)
+    start, reachable = reachable_cells(grid, grid.cell_to_world(np.array([20, 20])))
+    full = distance_field(grid, grid.cell_to_world(np.array(start)), snap_distance=0.01)
+    goals = rng.permutation(np.argwhere(reachable))[:12]
+    goals = np.concatenate([goals, goals[:2]])  # two goals on one cell
+    values = 20.0 * rng.random(len(goals))
+    values[3] = -np.inf
+    weight, min_cost = 2.0, 0.3
+    field = best_goal_field(grid, start, goals, values, cost_weight=weight, min_cost=min_cost)
+    true_costs = full.cost[goals[:, 0], goals[:, 1]]
+    costs = field.cost[goals[:, 0], goals[:, 1]]
+
+    def scores(c: np.ndarray) -> np.ndarray:
+        return np.where(c >= min_cost, values - weight * c, -np.inf)
+
+    best = int(np.argmax(scores(true_costs)))
+    assert int(np.argmax(scores(costs))) == best
+    assert costs[best] == true_costs[best]
+    np.testing.assert_array_equal(field.path_to(goals[best]), full.path_to(goals[best]))
+    assert np.all(costs >= true_costs)  # upper bounds elsewhere
+    settled = field.cost <= costs[best]
+    np.testing.assert_array_equal(field.cost[settled], full.cost[settled])
+    np.testing.assert_array_equal(field.parent[settled], full.parent[settled])
+    # The search did stop early on these grids, and runs to the end without a weight.
+    assert np.isinf(field.cost[reachable]).any() or (field.cost != full.cost).any()
+    whole = best_goal_field(grid, start, goals, values, cost_weight=0.0)
+    np.testing.assert_array_equal(whole.cost, full.cost)
+    np.testing.assert_array_equal(whole.parent, full.parent)
 
 
 def test_on_open_free_space_the_cost_is_the_octile_distance() -> None:

@@ -17,7 +17,7 @@ import pytest
 
 from mrslam_env.evaluation import map_agreement
 from mrslam_env.geometry import compose, inverse
-from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN
+from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.sim.lidar import cast_scan
 from mrslam_env.sim.world import WorldSpec, box, ground_truth_map
 from mrslam_env.slam.config import GridConfig, SlamConfig
@@ -351,6 +351,45 @@ def test_to_gridmap_is_the_trinary_view() -> None:
     assert gridmap.origin == grid.origin and gridmap.resolution == grid.resolution
     with pytest.raises(ValueError):
         grid.log_odds[0, 0] = 1.0  # read-only view
+
+
+def test_to_gridmap_thresholds_as_numpy_does_and_makes_a_valid_map() -> None:
+    # The one-pass kernel against the three-mask numpy view, with log-odds on and next to
+    # the (float32) thresholds, whose comparison numpy makes in float32.
+    config = GridConfig()
+    grid = OccupancyGrid(config)
+    rng = np.random.default_rng(3)
+    rows, cols = grid.shape
+    values = rng.normal(0.0, 1.0, (rows, cols)).astype(np.float32)
+    for threshold in (config.free_threshold, config.occupied_threshold):
+        on = np.float32(threshold)
+        values[0, :3] = (np.nextafter(on, np.float32(-9)), on, np.nextafter(on, np.float32(9)))
+        values = values[::-1].copy()
+    grid._log_odds[:] = values
+    expected = np.full((rows, cols), UNKNOWN, dtype=np.int8)
+    expected[values < config.free_threshold] = FREE
+    expected[values > config.occupied_threshold] = OCCUPIED
+    gridmap = grid.to_gridmap()
+    np.testing.assert_array_equal(gridmap.cells, expected)
+    assert gridmap.cells.dtype == np.int8 and set(np.unique(gridmap.cells)) == {-1, 0, 100}
+    checked = GridMap(cells=gridmap.cells, resolution=grid.resolution, origin=grid.origin)
+    assert (checked.origin, checked.resolution) == (gridmap.origin, gridmap.resolution)
+    assert type(gridmap.resolution) is float and all(type(v) is float for v in gridmap.origin)
+
+
+@pytest.mark.parametrize("bad", [1, 99, -2, 127, -128])
+@pytest.mark.parametrize("where", [(0, 0), (4, 6), (2, 3)])
+def test_gridmap_finds_a_bad_value_anywhere_also_in_a_strided_view(
+    bad: int, where: tuple[int, int]
+) -> None:
+    cells = np.full((5, 7), UNKNOWN, dtype=np.int8)
+    cells[1, 1], cells[3, 2] = FREE, OCCUPIED
+    GridMap(cells=cells, resolution=0.1)  # valid
+    cells[where] = bad
+    with pytest.raises(ValueError, match=rf"other than 0, 100, -1 \(e.g. {bad}\)"):
+        GridMap(cells=cells, resolution=0.1)
+    with pytest.raises(ValueError, match=rf"other than 0, 100, -1 \(e.g. {bad}\)"):
+        GridMap(cells=cells.T, resolution=0.1)  # not C-contiguous
 
 
 def test_box_room_mapped_with_true_poses_matches_the_ground_truth() -> None:

@@ -623,9 +623,14 @@ class OccupancyGrid:
     def to_gridmap(self) -> GridMap:
         """The trinary view: OCCUPIED above ``occupied_threshold``, FREE below
         ``free_threshold``, else UNKNOWN, placed in the grid's frame."""
-        cells = np.full(self.shape, UNKNOWN, dtype=np.int8)
-        cells[self._log_odds < self.config.free_threshold] = FREE
-        cells[self._log_odds > self.config.occupied_threshold] = OCCUPIED
+        # One pass instead of three (a teammate reads its map every step); the cells hold
+        # the three values by construction, so GridMap's value check is skipped. The
+        # thresholds go in as float32, as numpy compares the float32 log-odds with them.
+        cells = _trinary(
+            self._log_odds,
+            np.float32(self.config.free_threshold),
+            np.float32(self.config.occupied_threshold),
+        )
         return GridMap(cells=cells, resolution=self.resolution, origin=self.origin)
 
     # --- growth -------------------------------------------------------------------------
@@ -753,6 +758,26 @@ class OccupancyGrid:
         )
         self.known_cells += int(newly_known)
         return flips
+
+
+@numba.njit(cache=True)
+def _trinary(
+    log_odds: Float32Array, free_below: np.float32, occupied_above: np.float32
+) -> NDArray[np.int8]:
+    """The trinary cells of log-odds: OCCUPIED above ``occupied_above``, FREE below
+    ``free_below``, else UNKNOWN."""
+    rows, cols = log_odds.shape
+    cells = np.empty((rows, cols), dtype=np.int8)
+    for r in range(rows):
+        for c in range(cols):
+            value = log_odds[r, c]
+            if value > occupied_above:
+                cells[r, c] = OCCUPIED
+            elif value < free_below:
+                cells[r, c] = FREE
+            else:
+                cells[r, c] = UNKNOWN
+    return cells
 
 
 @numba.njit(cache=True)
