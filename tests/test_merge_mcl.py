@@ -173,3 +173,29 @@ def test_scan_endpoints_skip_invalid_and_no_return_beams(office_map):
     assert len(endpoints) == usable.sum()
     np.testing.assert_allclose(np.hypot(*endpoints.T), ranges[usable])
     assert len(scan_endpoints(run, 0, 10)) == min(10, usable.sum())
+
+
+def test_numba_wrap_and_cluster_window_match_numpy_bit_for_bit():
+    """The kernels behind the particle sampling and clustering wrap angles exactly as
+    :func:`~mrslam_env.geometry.wrap_angle` does, so the filter draws the same particles."""
+    from mrslam_env.merge.mcl import _within, _wrap_angles
+
+    rng = np.random.default_rng(3)
+    angles = np.concatenate(
+        [
+            rng.uniform(-20.0, 20.0, 50_000),
+            np.array([0.0, -0.0, math.pi, -math.pi, 3 * math.pi, -3 * math.pi, 2 * math.pi]),
+            np.nextafter(np.array([math.pi, -math.pi]), 0.0),
+        ]
+    )
+    assert np.array_equal(_wrap_angles(angles).view(np.int64), wrap_angle(angles).view(np.int64))
+    particles = np.column_stack(
+        [rng.uniform(-2, 2, 5000), rng.uniform(-2, 2, 5000), rng.uniform(-4, 4, 5000)]
+    )
+    for centre in (np.array([0.1, -0.2, 3.0]), np.array([0.0, 0.0, -math.pi])):
+        dx = particles[:, 0] - centre[0]
+        dy = particles[:, 1] - centre[1]
+        expected = (dx * dx + dy * dy <= 0.5 * 0.5) & (
+            np.abs(wrap_angle(particles[:, 2] - centre[2])) <= 0.3
+        )
+        assert np.array_equal(_within(particles, centre, 0.5, 0.3), expected)

@@ -363,7 +363,7 @@ def sample_near_skeleton(
             + flip[aligned]
             + config.aligned_heading_std * rng.normal(size=int(aligned.sum()))
         )
-        fresh = np.column_stack([points, wrap_angle(heading)])[ok]
+        fresh = np.column_stack([points, _wrap_angles(heading)])[ok]
         out = np.vstack([out, fresh])
     if len(out) < count:  # the skeleton is all but enclosed by non-free cells
         free_cells = np.argwhere(prepared.free)
@@ -565,13 +565,56 @@ def particle_clusters(
     return clusters
 
 
+_TWO_PI = 2.0 * math.pi
+
+
+@numba.njit(cache=True, inline="always")
+def _wrap(angle: float) -> float:
+    """:func:`~mrslam_env.geometry.wrap_angle` of one angle, bit for bit (numba's float
+    ``%`` and numpy's ``mod`` both take the sign of the divisor)."""
+    return math.pi - (math.pi - angle) % _TWO_PI
+
+
+@numba.njit(cache=True)
+def _wrap_angles(angles: FloatArray) -> FloatArray:
+    """:func:`~mrslam_env.geometry.wrap_angle` of a 1-D array, bit for bit."""
+    out = np.empty(angles.shape[0])
+    for i in range(angles.shape[0]):
+        out[i] = _wrap(angles[i])
+    return out
+
+
+@numba.njit(cache=True)
+def _within_kernel(
+    particles: FloatArray,
+    centre_x: float,
+    centre_y: float,
+    centre_theta: float,
+    radius_squared: float,
+    angle: float,
+) -> NDArray[np.bool_]:
+    out = np.empty(particles.shape[0], dtype=np.bool_)
+    for i in range(particles.shape[0]):
+        dx = particles[i, 0] - centre_x
+        dy = particles[i, 1] - centre_y
+        out[i] = (dx * dx + dy * dy <= radius_squared) and (
+            abs(_wrap(particles[i, 2] - centre_theta)) <= angle
+        )
+    return out
+
+
 def _within(
     particles: FloatArray, centre: FloatArray, radius: float, angle: float
 ) -> NDArray[np.bool_]:
-    dx = particles[:, 0] - centre[0]
-    dy = particles[:, 1] - centre[1]
-    dtheta = np.abs(wrap_angle(particles[:, 2] - centre[2]))
-    return (dx * dx + dy * dy <= radius * radius) & (dtheta <= angle)
+    """Particles within ``radius`` (x, y) and ``angle`` (heading) of ``centre``."""
+    return _within_kernel(
+        np.ascontiguousarray(particles, dtype=np.float64),
+        float(centre[0]),
+        float(centre[1]),
+        float(centre[2]),
+        radius * radius,
+        angle,
+    )
 
 
 def _weighted_mean_pose(particles: FloatArray, weights: FloatArray) -> FloatArray:

@@ -297,8 +297,11 @@ def refine_random_walk(
     accepted = np.zeros(n, dtype=bool) if trace else None
     best_history = np.empty(n) if trace else None
 
+    proposal: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
     for k in range(n):
-        mean, cholesky = adapted_proposal(np.asarray(moves).reshape(-1, 3), config, fallback_scale)
+        if proposal is None:  # only accepted moves and stalls change the proposal
+            proposal = adapted_proposal(np.asarray(moves).reshape(-1, 3), config, fallback_scale)
+        mean, cholesky = proposal
         move = mean + cholesky @ rng.standard_normal(3)
         worse_ok = rng.random() < config.worse_move_probability
         candidate = current + move
@@ -308,6 +311,7 @@ def refine_random_walk(
         take = math.isfinite(psi) and (psi <= current_psi or worse_ok)
         if take:
             moves.append(move)
+            proposal = None
             accepted_moves += 1
             rejections_in_a_row = 0
             current, current_psi = candidate, psi
@@ -319,6 +323,7 @@ def refine_random_walk(
                 # The remembered moves no longer lead anywhere: forget them, go back to
                 # the best transform and search around it with a smaller fallback proposal.
                 moves.clear()
+                proposal = None
                 fallback_scale *= 0.5
                 rejections_in_a_row = 0
                 current, current_psi = best.copy(), best_psi
