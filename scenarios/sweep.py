@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
 from typing import TypeVar
 
 __all__ = ["RAY_EXTRA", "run_tasks"]
@@ -43,7 +44,9 @@ def run_tasks(
     if ray is not None:
         return _run_on_ray(function, tasks, jobs, ray, on_result)
     results: list[R] = []
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
+    # Spawned, not forked: a fork of a process whose libraries keep thread pools (torch,
+    # BLAS, numba) can deadlock in the child.
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn")) as pool:
         for result in pool.map(function, tasks):
             results.append(result)
             if on_result is not None:
