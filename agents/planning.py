@@ -443,6 +443,53 @@ def _heap_pop(keys: FloatArray, items: IntArray, size: int) -> tuple[float, int,
 
 
 @numba.njit(cache=True)
+def _relax_neighbours(
+    cost: FloatArray,
+    distance: FloatArray,
+    parent: IntArray,
+    done: NDArray[np.bool_],
+    row: int,
+    col: int,
+    key: float,
+    item: int,
+    resolution: float,
+    diagonal: float,
+    neighbour_rows: IntArray,
+    neighbour_cols: IntArray,
+    keys: FloatArray,
+    items: IntArray,
+    size: int,
+) -> tuple[FloatArray, IntArray, int]:
+    """One Dijkstra expansion of the settled cell ``(row, col)`` at path cost ``key``: each
+    of its 8 neighbours not yet settled (a diagonal step needs both cells it passes) gets
+    a shorter path through it, pushed on the heap; returns the heap."""
+    rows, cols = cost.shape
+    here = cost[row, col]
+    for k in range(8):
+        dr = neighbour_rows[k]
+        dc = neighbour_cols[k]
+        r = row + dr
+        c = col + dc
+        if r < 0 or r >= rows or c < 0 or c >= cols or done[r, c]:
+            continue
+        there = cost[r, c]
+        if not math.isfinite(there):
+            continue
+        if k >= 4:
+            if not (math.isfinite(cost[row + dr, col]) and math.isfinite(cost[row, col + dc])):
+                continue
+            length = diagonal
+        else:
+            length = resolution
+        candidate = key + length * 0.5 * (here + there)
+        if candidate < distance[r, c]:
+            distance[r, c] = candidate
+            parent[r, c] = item
+            keys, items, size = _heap_push(keys, items, size, candidate, r * cols + c)
+    return keys, items, size
+
+
+@numba.njit(cache=True)
 def _dijkstra_kernel(
     cost: FloatArray,
     start_row: int,
@@ -478,28 +525,23 @@ def _dijkstra_kernel(
         done[row, col] = True
         if row == goal_row and col == goal_col:
             break
-        here = cost[row, col]
-        for k in range(8):
-            dr = neighbour_rows[k]
-            dc = neighbour_cols[k]
-            r = row + dr
-            c = col + dc
-            if r < 0 or r >= rows or c < 0 or c >= cols or done[r, c]:
-                continue
-            there = cost[r, c]
-            if not math.isfinite(there):
-                continue
-            if k >= 4:
-                if not (math.isfinite(cost[row + dr, col]) and math.isfinite(cost[row, col + dc])):
-                    continue
-                length = diagonal
-            else:
-                length = resolution
-            candidate = key + length * 0.5 * (here + there)
-            if candidate < distance[r, c]:
-                distance[r, c] = candidate
-                parent[r, c] = item
-                keys, items, size = _heap_push(keys, items, size, candidate, r * cols + c)
+        keys, items, size = _relax_neighbours(
+            cost,
+            distance,
+            parent,
+            done,
+            row,
+            col,
+            key,
+            item,
+            resolution,
+            diagonal,
+            neighbour_rows,
+            neighbour_cols,
+            keys,
+            items,
+            size,
+        )
     return distance, parent
 
 
@@ -559,28 +601,23 @@ def _best_goal_kernel(
         # Every unsettled cell's path cost is at least ``key``.
         if open_value - cost_weight * key < best - margin:
             break
-        here = cost[row, col]
-        for k in range(8):
-            dr = neighbour_rows[k]
-            dc = neighbour_cols[k]
-            r = row + dr
-            c = col + dc
-            if r < 0 or r >= rows or c < 0 or c >= cols or done[r, c]:
-                continue
-            there = cost[r, c]
-            if not math.isfinite(there):
-                continue
-            if k >= 4:
-                if not (math.isfinite(cost[row + dr, col]) and math.isfinite(cost[row, col + dc])):
-                    continue
-                length = diagonal
-            else:
-                length = resolution
-            candidate = key + length * 0.5 * (here + there)
-            if candidate < distance[r, c]:
-                distance[r, c] = candidate
-                parent[r, c] = item
-                keys, items, size = _heap_push(keys, items, size, candidate, r * cols + c)
+        keys, items, size = _relax_neighbours(
+            cost,
+            distance,
+            parent,
+            done,
+            row,
+            col,
+            key,
+            item,
+            resolution,
+            diagonal,
+            neighbour_rows,
+            neighbour_cols,
+            keys,
+            items,
+            size,
+        )
     return distance, parent
 
 
