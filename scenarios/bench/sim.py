@@ -14,8 +14,10 @@ import math
 import statistics
 import time
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from mrslam_env.config import EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
@@ -164,18 +166,7 @@ def single_robot_steps_per_second(
 
     env = SingleRobotEnv(scenario=scenario, teammates=teammates, max_cycles=n_steps + 101)
     commands = driving_commands(n_steps, 1)[:, 0].astype(np.float32)
-    env.reset(seed=repeats)
-    for k in range(min(n_steps, 100)):
-        env.step(commands[k])
-    rates = []
-    for repeat in range(repeats):
-        env.reset(seed=repeat)
-        started = time.perf_counter()
-        for k in range(n_steps):
-            env.step(commands[k])
-        rates.append(n_steps / (time.perf_counter() - started))
-    env.close()
-    return statistics.median(rates)
+    return _median_rate(env, commands, n_steps, repeats, learners=1)
 
 
 def vector_steps_per_second(
@@ -199,17 +190,26 @@ def vector_steps_per_second(
     )
     vector = gymnasium.vector.AsyncVectorEnv([make] * processes)
     commands = driving_commands(n_steps, processes).astype(np.float32)
-    vector.reset(seed=repeats)
+    return _median_rate(vector, commands, n_steps, repeats, learners=processes)
+
+
+def _median_rate(
+    env: Any, commands: NDArray[np.float32], n_steps: int, repeats: int, *, learners: int
+) -> float:
+    """Median learner steps/s of ``env`` (a Gymnasium env or vector env, closed after):
+    up to 100 warm-up steps, then ``repeats`` timed runs of ``n_steps`` from resets seeded
+    0, 1, ..."""
+    env.reset(seed=repeats)
     for k in range(min(n_steps, 100)):
-        vector.step(commands[k])
+        env.step(commands[k])
     rates = []
     for repeat in range(repeats):
-        vector.reset(seed=repeat)
+        env.reset(seed=repeat)
         started = time.perf_counter()
         for k in range(n_steps):
-            vector.step(commands[k])
-        rates.append(processes * n_steps / (time.perf_counter() - started))
-    vector.close()
+            env.step(commands[k])
+        rates.append(learners * n_steps / (time.perf_counter() - started))
+    env.close()
     return statistics.median(rates)
 
 
