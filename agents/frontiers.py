@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
-from mrslam_env.gridmap import UNKNOWN, GridMap
+from mrslam_env.gridmap import GridMap, known_window
 from mrslam_env.validation import check_fields, require
 
 __all__ = [
@@ -528,16 +528,7 @@ def _work_window(grid: GridMap, reachable: BoolArray, margin: int) -> tuple[slic
     (with ``margin >= 2``: the one-cell UNKNOWN ring that keeps the outside connected, and
     the erosion's neighbourhood) for a fraction of the work on a grown SLAM grid.
     """
-    rows, cols = grid.shape
-    known = (grid.cells != UNKNOWN) | reachable
-    known_rows = np.flatnonzero(known.any(axis=1))
-    if len(known_rows) == 0:
-        return slice(0, rows), slice(0, cols)
-    known_cols = np.flatnonzero(known[known_rows[0] : known_rows[-1] + 1].any(axis=0))
-    return (
-        slice(max(int(known_rows[0]) - margin, 0), min(int(known_rows[-1]) + margin + 1, rows)),
-        slice(max(int(known_cols[0]) - margin, 0), min(int(known_cols[-1]) + margin + 1, cols)),
-    )
+    return known_window(grid, margin, also=reachable)
 
 
 def extract_frontiers(

@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 from agents.robot import DEFAULT_ENV, EnvFigures, build_for_env, check_against_env
 from mrslam_env.config import EnvConfig
 from mrslam_env.geometry import cell_to_world, world_to_cell
-from mrslam_env.gridmap import OCCUPIED, UNKNOWN, GridMap
+from mrslam_env.gridmap import OCCUPIED, UNKNOWN, GridMap, known_window
 from mrslam_env.validation import check_fields, require
 
 __all__ = [
@@ -222,7 +222,7 @@ def inflate(grid: GridMap, config: PlannerConfig | None = None) -> CostGrid:
     # Walls lie in the known part of the map, so the distances the cost depends on (up to
     # ``band``) all lie inside it grown by ``band``: a SLAM grid grows in chunks and is
     # mostly unknown margin, where the cost is that of an unknown cell far from walls.
-    rows, cols = _known_window(grid, math.ceil(band / grid.resolution) + 1)
+    rows, cols = known_window(grid, math.ceil(band / grid.resolution) + 1)
     cells = grid.cells[rows, cols]
     occupied = cells == OCCUPIED
     far_unknown = np.inf if config.unknown == "blocked" else config.unknown_cost
@@ -336,21 +336,6 @@ def _squared_distance_to(features: NDArray[np.bool_]) -> FloatArray:
             if u == starts[q]:
                 q -= 1
     return squared
-
-
-def _known_window(grid: GridMap, margin: int) -> tuple[slice, slice]:
-    """Rows and columns of the bounding box of the map's known cells grown by ``margin``
-    cells, clipped to the grid (the whole grid when nothing is known)."""
-    known = ~grid.unknown
-    rows, cols = grid.shape
-    known_rows = np.flatnonzero(known.any(axis=1))
-    if len(known_rows) == 0:
-        return slice(0, rows), slice(0, cols)
-    known_cols = np.flatnonzero(known[known_rows[0] : known_rows[-1] + 1].any(axis=0))
-    return (
-        slice(max(int(known_rows[0]) - margin, 0), min(int(known_rows[-1]) + margin + 1, rows)),
-        slice(max(int(known_cols[0]) - margin, 0), min(int(known_cols[-1]) + margin + 1, cols)),
-    )
 
 
 def nearest_passable_cell(

@@ -28,6 +28,7 @@ __all__ = [
     "crop_to_known",
     "grid_footprint",
     "grid_in_frame",
+    "known_window",
     "resample_cells",
 ]
 
@@ -237,6 +238,35 @@ def crop_to_known(grid: GridMap, margin: int = 0) -> GridMap:
     ] = inner
     origin = (grid.origin[0] + c0 * grid.resolution, grid.origin[1] + r0 * grid.resolution)
     return GridMap(cells=cells, resolution=grid.resolution, origin=origin)
+
+
+def known_window(
+    grid: GridMap, margin: int, *, also: NDArray[np.bool_] | None = None
+) -> tuple[slice, slice]:
+    """Rows and columns of the bounding box of the map's known cells (and of the True cells
+    of ``also``, a mask of the grid's shape) grown by ``margin`` cells and clipped to the
+    grid; the whole grid when there is no such cell. One pass over the cells, no
+    grid-sized temporary but ``also``'s."""
+    rows, cols = grid.shape
+    boxes = []
+    low_row, high_row, low_col, high_col = _known_box(grid.cells)
+    if high_row >= 0:
+        boxes.append((low_row, high_row, low_col, high_col))
+    if also is not None:
+        also_rows = np.flatnonzero(also.any(axis=1))
+        if len(also_rows):
+            also_cols = np.flatnonzero(also[also_rows[0] : also_rows[-1] + 1].any(axis=0))
+            boxes.append(
+                (int(also_rows[0]), int(also_rows[-1]), int(also_cols[0]), int(also_cols[-1]))
+            )
+    if not boxes:
+        return slice(0, rows), slice(0, cols)
+    r0, r1 = min(b[0] for b in boxes), max(b[1] for b in boxes)
+    c0, c1 = min(b[2] for b in boxes), max(b[3] for b in boxes)
+    return (
+        slice(max(r0 - margin, 0), min(r1 + margin + 1, rows)),
+        slice(max(c0 - margin, 0), min(c1 + margin + 1, cols)),
+    )
 
 
 def grid_in_frame(grid: GridMap, frame_from_grid: ArrayLike) -> GridMap:

@@ -85,3 +85,23 @@ def test_warp_map_is_resample_cells_onto_its_lattice() -> None:
             warped = warp_map(m2, transform, like=like)
             cells = resample_cells(m2, transform, warped.origin, warped.shape, m2.resolution)
             np.testing.assert_array_equal(warped.cells, cells)
+
+
+def test_known_window_is_the_grown_box_of_the_known_cells_and_of_also() -> None:
+    from mrslam_env.gridmap import known_window
+
+    cells = np.full((20, 30), UNKNOWN, dtype=np.int8)
+    assert known_window(GridMap(cells=cells, resolution=0.1), 3) == (slice(0, 20), slice(0, 30))
+    cells[5, 7] = FREE
+    cells[9, 12] = OCCUPIED
+    grid = GridMap(cells=cells, resolution=0.1)
+    assert known_window(grid, 0) == (slice(5, 10), slice(7, 13))
+    assert known_window(grid, 2) == (slice(3, 12), slice(5, 15))
+    assert known_window(grid, 8) == (slice(0, 18), slice(0, 21))  # clipped to the grid
+    also = np.zeros(cells.shape, dtype=bool)
+    also[15, 25] = True
+    assert known_window(grid, 1, also=also) == (slice(4, 17), slice(6, 27))
+    empty = GridMap(cells=np.full((4, 4), UNKNOWN, dtype=np.int8), resolution=0.1)
+    only = np.zeros((4, 4), dtype=bool)
+    only[2, 1] = True
+    assert known_window(empty, 0, also=only) == (slice(2, 3), slice(1, 2))
