@@ -451,8 +451,15 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
                 continue
             ever = self._ever_known_aligned(i, slam.grid)
             config = grid.config
+            # ``ever`` holds every cell known before this scan: only the cells it wrote
+            # can be new.
+            candidates = slam.grid.last_written if slam.n_integrated == integrated + 1 else None
             cells = mark_newly_known(
-                slam.grid.log_odds, ever, config.free_threshold, config.occupied_threshold
+                slam.grid.log_odds,
+                ever,
+                config.free_threshold,
+                config.occupied_threshold,
+                candidates,
             )
             grid = slam.grid
             area[i] = len(cells) * grid.resolution**2
