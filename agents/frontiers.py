@@ -273,23 +273,28 @@ def cluster_frontiers(
         return labels, 0
     min_cells = config.min_size / resolution
     max_cells = max(config.max_size / resolution, 1.0)
+    # Every component's cells at once, in row-major order within each component.
+    cell_rows, cell_cols = np.nonzero(components)
+    owner = components[cell_rows, cell_cols]
+    order = np.argsort(owner, kind="stable")
+    cell_rows, cell_cols, owner = cell_rows[order], cell_cols[order], owner[order]
+    bounds = np.searchsorted(owner, np.arange(1, count + 2))
     next_label = 1
-    for index, window in enumerate(ndimage.find_objects(components), start=1):
-        if window is None:
+    for index in range(count):
+        begin, end = bounds[index], bounds[index + 1]
+        if end - begin < min_cells:
             continue
-        local = np.argwhere(components[window] == index)
-        if len(local) < min_cells:
-            continue
-        pieces = math.ceil(len(local) / max_cells)
-        piece = np.zeros(len(local), dtype=np.int64)
+        rows, cols = cell_rows[begin:end], cell_cols[begin:end]
+        pieces = math.ceil((end - begin) / max_cells)
+        piece = np.zeros(end - begin, dtype=np.int64)
         if pieces > 1:
+            # Cell coordinates from the corner of the component's bounding box.
+            local = np.stack([rows - rows.min(), cols - cols.min()], axis=1)
             centred = local - local.mean(axis=0)
             # Principal axis of the cell cloud: the eigenvector of the largest eigenvalue.
             _, vectors = np.linalg.eigh(centred.T @ centred)
             order = np.argsort(centred @ vectors[:, -1], kind="stable")
             piece[order] = np.arange(len(local)) * pieces // len(local)
-        rows = local[:, 0] + window[0].start
-        cols = local[:, 1] + window[1].start
         labels[rows, cols] = next_label + piece
         next_label += pieces
     return labels, next_label - 1
@@ -478,11 +483,10 @@ def _goal_cells(
     max_goal_offset: float,
     offset: tuple[int, int] = (0, 0),
 ) -> tuple[IntArray, BoolArray]:
-    """Per frontier: the reachable cell nearest to its cell closest to its centroid.
+    """Per frontier: the reachable cell nearest to its cell closest to its centroid, among
+    its cells within ``max_goal_offset`` of reachable space.
 
-    If that cell is too far from anything reachable, the frontier cell nearest to the
-    reachable space is used instead; the frontier is invalid when even that is farther
-    than ``max_goal_offset``. ``labels`` and ``reachable`` may be a window of the map
+    A frontier with no such cell is invalid. ``labels`` and ``reachable`` may be a window of the map
     whose cell [0, 0] is the map's cell ``offset``; ``centroid_cells`` and the goal cells
     returned are in the map's cells.
     """
@@ -490,32 +494,24 @@ def _goal_cells(
     valid = np.zeros(count, dtype=bool)
     if count == 0 or not reachable.any():
         return goal_cells, valid
-    nearest = ndimage.distance_transform_edt(
-        ~reachable, return_distances=False, return_indices=True
-    )
     cells = np.argwhere(labels > 0)
     owner = labels[cells[:, 0], cells[:, 1]] - 1
     to_centroid = ((cells + np.asarray(offset) - centroid_cells[owner]) ** 2).sum(axis=1)
-    # The distances at the frontier cells only, as the transform computes them everywhere.
-    steps = (nearest[:, cells[:, 0], cells[:, 1]] - cells.T.astype(np.int32)).astype(np.float64)
-    to_reachable = np.sqrt(np.add.reduce(steps * steps, axis=0)) * resolution
-    # The middle cell when it is close enough to reachable space, else the closest cell.
-    middle_ok = to_reachable <= max_goal_offset
-    key = np.where(middle_ok, to_centroid, np.inf)
-    fallback = np.where(middle_ok, np.inf, to_reachable)
-    for frontier in range(count):
-        mine = np.flatnonzero(owner == frontier)
-        if len(mine) == 0:
-            continue
-        if np.isfinite(key[mine]).any():
-            best = mine[np.argmin(key[mine])]
-        else:
-            best = mine[np.argmin(fallback[mine])]
-            if to_reachable[best] > max_goal_offset:
-                continue
-        row, col = cells[best]
-        goal_cells[frontier] = (nearest[0][row, col] + offset[0], nearest[1][row, col] + offset[1])
-        valid[frontier] = True
+    # The nearest reachable cell at the frontier cells only (the transform scipy's
+    # distance_transform_edt would compute everywhere, ties broken as it does).
+    nearest = _nearest_feature_at(reachable, cells)
+    steps = (nearest - cells).astype(np.float64)
+    to_reachable = np.sqrt(steps[:, 0] * steps[:, 0] + steps[:, 1] * steps[:, 1]) * resolution
+    # The cell closest to the middle among those close enough to reachable space (the
+    # first in row-major order on a tie); a frontier with none is dropped (even its cell
+    # closest to reachable space is farther than max_goal_offset).
+    key = np.where(to_reachable <= max_goal_offset, to_centroid, np.inf)
+    order = np.lexsort((key, owner))  # stable: ties keep the row-major order
+    first = order[np.flatnonzero(np.diff(owner[order], prepend=-1))]
+    chosen = first[np.isfinite(key[first])]
+    frontiers = owner[chosen]
+    goal_cells[frontiers] = nearest[chosen] + np.asarray(offset)
+    valid[frontiers] = True
     return goal_cells, valid
 
 
@@ -610,3 +606,73 @@ def extract_frontiers(
         goals=goals,
         gains=gains,
     )
+
+
+@numba.njit(cache=True)
+def _nearest_feature_at(features: BoolArray, cells: IntArray) -> IntArray:
+    """The nearest ``True`` cell ``(row, col)`` of each of ``cells`` (K, 2), row-major
+    sorted, as ``ndimage.distance_transform_edt(~features, return_indices=True)`` gives
+    it, ties included: the same exact algorithm (Maurer, Qi and Raghavan 2003), a pass
+    along each column then one along each row, in integers, the row pass only on the
+    rows of ``cells``. Needs one ``True`` cell at least."""
+    rows, cols = features.shape
+    # Per column, for each row: the nearest feature row in the column (ties: the lower
+    # row), or -1 when the column has none; from the last feature at or above and the
+    # first at or below.
+    above = np.empty((rows, cols), dtype=np.int32)
+    below = np.empty((rows, cols), dtype=np.int32)
+    for c in range(cols):  # row by row, for the cache
+        above[0, c] = 0 if features[0, c] else -1
+        below[rows - 1, c] = rows - 1 if features[rows - 1, c] else -1
+    for r in range(1, rows):
+        for c in range(cols):
+            above[r, c] = r if features[r, c] else above[r - 1, c]
+    for r in range(rows - 2, -1, -1):
+        for c in range(cols):
+            below[r, c] = r if features[r, c] else below[r + 1, c]
+    out = np.empty((len(cells), 2), dtype=np.int64)
+    sites = np.empty(cols, dtype=np.int64)  # the columns of the envelope's sites
+    site_row = np.empty(cols, dtype=np.int64)
+    k = 0
+    while k < len(cells):
+        r = cells[k, 0]
+        # The column pass's feature at (r, c) for every column c.
+        top = -1
+        for c in range(cols):
+            up, down = np.int64(above[r, c]), np.int64(below[r, c])
+            if up < 0:
+                feature = down
+            elif down < 0 or r - up <= down - r:
+                feature = up
+            else:
+                feature = down
+            if feature < 0:
+                continue
+            # Drop the sites the new one hides along this row (the lower envelope).
+            w = (feature - r) ** 2
+            while top >= 1:
+                a = sites[top] - sites[top - 1]
+                b = c - sites[top]
+                u = (site_row[top - 1] - r) ** 2
+                v = (site_row[top] - r) ** 2
+                if (a + b) * v - b * u - a * w - a * b * (a + b) <= 0:
+                    break
+                top -= 1
+            top += 1
+            sites[top] = c
+            site_row[top] = feature
+        # Query the row's cells left to right: advance while the next site is closer.
+        at = 0
+        while k < len(cells) and cells[k, 0] == r:
+            c = cells[k, 1]
+            here = (site_row[at] - r) ** 2 + (sites[at] - c) ** 2
+            while at < top:
+                there = (site_row[at + 1] - r) ** 2 + (sites[at + 1] - c) ** 2
+                if here <= there:
+                    break
+                here = there
+                at += 1
+            out[k, 0] = site_row[at]
+            out[k, 1] = sites[at]
+            k += 1
+    return out
