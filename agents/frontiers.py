@@ -179,8 +179,7 @@ def frontier_cells(
     """
     config = config if config is not None else FrontierConfig()
     unknown = _padded_unknown(grid, config.min_unknown_area)
-    structure = ndimage.generate_binary_structure(2, 1 if config.connectivity == 4 else 2)
-    near_unknown = ndimage.binary_dilation(unknown, structure=structure)[1:-1, 1:-1]
+    near_unknown = _dilated_inside(unknown, config.connectivity == 8)
     free = grid.free
     if config.min_free_width > 1:
         # Single beams through gaps leave one-cell-wide streaks of FREE in unknown space
@@ -194,6 +193,27 @@ def frontier_cells(
     if reachable is not None:
         cells &= _near_reachable(reachable, grid.resolution, config.max_goal_offset)
     return cells
+
+
+@numba.njit(cache=True)
+def _dilated_inside(padded: BoolArray, corners: bool) -> BoolArray:
+    """``ndimage.binary_dilation`` of ``padded`` by the cross (``corners``: the 3 x 3
+    square), without its one-cell border."""
+    rows, cols = padded.shape[0] - 2, padded.shape[1] - 2
+    out = np.empty((rows, cols), dtype=np.bool_)
+    for r in range(rows):
+        for c in range(cols):
+            near = (
+                padded[r + 1, c + 1]
+                or padded[r, c + 1]
+                or padded[r + 2, c + 1]
+                or padded[r + 1, c]
+                or padded[r + 1, c + 2]
+            )
+            if corners and not near:
+                near = padded[r, c] or padded[r, c + 2] or padded[r + 2, c] or padded[r + 2, c + 2]
+            out[r, c] = near
+    return out
 
 
 @numba.njit(cache=True)
@@ -362,6 +382,7 @@ def connected_information_gain(
     sensor_range: float,
     *,
     min_open_fraction: float = 0.0,
+    cells: tuple[IntArray, IntArray] | None = None,
 ) -> FloatArray:
     """Unknown area near each frontier's goal that the frontier actually opens onto.
 
@@ -384,6 +405,8 @@ def connected_information_gain(
         m.
     min_open_fraction : float
         In [0, 1].
+    cells : tuple of two int arrays, optional
+        ``np.nonzero(labels)``, if already known.
 
     Returns
     -------
@@ -399,7 +422,7 @@ def connected_information_gain(
     regions, region_count = ndimage.label(unknown)
     outside = regions[0, 0]
     # The unknown regions each frontier touches: labels of its cells' 4-neighbours.
-    frontier_rows, frontier_cols = np.nonzero(labels)
+    frontier_rows, frontier_cols = np.nonzero(labels) if cells is None else cells
     owner = labels[frontier_rows, frontier_cols] - 1
     touches = np.zeros((count, region_count + 1), dtype=bool)
     for d_row, d_col in ((1, 0), (-1, 0), (0, 1), (0, -1)):
@@ -414,10 +437,10 @@ def connected_information_gain(
     centres = grid.world_to_cell(points) + 1  # padded coordinates
     counts, sizes = _touched_in_squares(regions, touches, centres, half)
     for frontier in range(count):
-        cells = int(counts[frontier])
+        seen = int(counts[frontier])
         if outside and touches[frontier, outside]:
-            cells += box - int(sizes[frontier])  # the square's part beyond the padded grid
-        gains[frontier] = cells
+            seen += box - int(sizes[frontier])  # the square's part beyond the padded grid
+        gains[frontier] = seen
     return gains * grid.resolution**2
 
 
@@ -482,19 +505,20 @@ def _goal_cells(
     resolution: float,
     max_goal_offset: float,
     offset: tuple[int, int] = (0, 0),
+    cells: IntArray | None = None,
 ) -> tuple[IntArray, BoolArray]:
     """Per frontier: the reachable cell nearest to its cell closest to its centroid, among
     its cells within ``max_goal_offset`` of reachable space.
 
     A frontier with no such cell is invalid. ``labels`` and ``reachable`` may be a window of the map
     whose cell [0, 0] is the map's cell ``offset``; ``centroid_cells`` and the goal cells
-    returned are in the map's cells.
+    returned are in the map's cells; ``cells``, if given, is ``np.argwhere(labels > 0)``.
     """
     goal_cells = np.zeros((count, 2), dtype=np.int64)
     valid = np.zeros(count, dtype=bool)
     if count == 0 or not reachable.any():
         return goal_cells, valid
-    cells = np.argwhere(labels > 0)
+    cells = np.argwhere(labels > 0) if cells is None else cells
     owner = labels[cells[:, 0], cells[:, 1]] - 1
     to_centroid = ((cells + np.asarray(offset) - centroid_cells[owner]) ** 2).sum(axis=1)
     # The nearest reachable cell at the frontier cells only (the transform scipy's
@@ -567,10 +591,10 @@ def extract_frontiers(
     reach = reach[rows, cols]
     cells = frontier_cells(window, config)
     labels, count = cluster_frontiers(cells, grid.resolution, config)
-    frontier_rows, frontier_cols = np.nonzero(labels)
-    owner = labels[frontier_rows, frontier_cols]
-    frontier_rows = frontier_rows + offset[0]
-    frontier_cols = frontier_cols + offset[1]
+    window_rows, window_cols = np.nonzero(labels)
+    owner = labels[window_rows, window_cols]
+    frontier_rows = window_rows + offset[0]
+    frontier_cols = window_cols + offset[1]
     sizes = np.bincount(owner, minlength=count + 1)[1:].astype(np.float64)
     safe = np.maximum(sizes, 1.0)
     centroid_cells = np.stack(
@@ -581,7 +605,14 @@ def extract_frontiers(
         axis=1,
     ).reshape(-1, 2)
     goal_cells, valid = _goal_cells(
-        labels, count, centroid_cells, reach, grid.resolution, config.max_goal_offset, offset
+        labels,
+        count,
+        centroid_cells,
+        reach,
+        grid.resolution,
+        config.max_goal_offset,
+        offset,
+        np.stack([window_rows, window_cols], axis=1),
     )
     order = np.flatnonzero(valid)
     order = order[np.argsort(-sizes[order], kind="stable")]
@@ -592,7 +623,14 @@ def extract_frontiers(
     if config.gain_model == "box":
         gains = information_gain(grid, goals, config.sensor_range)
     else:
-        gains = connected_information_gain(window, labels, goals, config.sensor_range)
+        kept = labels[window_rows, window_cols] > 0  # the valid frontiers' cells
+        gains = connected_information_gain(
+            window,
+            labels,
+            goals,
+            config.sensor_range,
+            cells=(window_rows[kept], window_cols[kept]),
+        )
     gains = np.minimum(gains, sizes[order] * grid.resolution * config.view_depth)
     if labels.shape != grid.shape:
         full_labels = np.zeros(grid.shape, dtype=np.int32)

@@ -8,6 +8,7 @@ from scipy import ndimage
 
 from agents.frontiers import (
     FrontierConfig,
+    _dilated_inside,
     _nearest_feature_at,
     _open_square,
     cluster_frontiers,
@@ -274,3 +275,14 @@ def test_long_frontier_pieces_and_goals_do_not_depend_on_where_the_map_lies() ->
     np.testing.assert_array_equal(moved.goal_cells, base.goal_cells + np.array([37, 51]))
     np.testing.assert_array_equal(moved.sizes, base.sizes)
     np.testing.assert_array_equal(moved.labels[37:137, 51:171], base.labels)
+
+
+@pytest.mark.parametrize("corners", [False, True])
+def test_the_dilation_next_to_unknown_is_scipys(corners: bool) -> None:
+    rng = np.random.default_rng(11)
+    structure = ndimage.generate_binary_structure(2, 2 if corners else 1)
+    for density in (0.02, 0.2, 0.6):
+        for _ in range(40):
+            padded = rng.random((int(rng.integers(2, 30)), int(rng.integers(2, 30)))) < density
+            expected = ndimage.binary_dilation(padded, structure=structure)[1:-1, 1:-1]
+            np.testing.assert_array_equal(_dilated_inside(padded, corners), expected)
