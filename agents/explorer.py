@@ -28,6 +28,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -410,6 +411,7 @@ class ExplorerPolicy:
         self._best_step = 0
         self._grid_origin: tuple[float, float] = (0.0, 0.0)
         self._grid_resolution = 1.0
+        self._path_arcs: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None = None
 
     # --- what the coordinator and the recorder read and set -------------------------------
 
@@ -719,9 +721,14 @@ class ExplorerPolicy:
         if len(path) < 2:
             return False
         start = self.follower.progress
-        segments = np.diff(path, axis=0)
-        lengths = np.hypot(segments[:, 0], segments[:, 1])
-        arc = np.concatenate(([0.0], np.cumsum(lengths)))
+        # The path's segments and arc lengths, once per path (the path changes on replans).
+        cached = self._path_arcs
+        if cached is None or not np.array_equal(cached[0], path):
+            segments = np.diff(path, axis=0)
+            lengths = np.hypot(segments[:, 0], segments[:, 1])
+            cached = (path, segments, lengths, np.concatenate(([0.0], np.cumsum(lengths))))
+            self._path_arcs = cached
+        _, segments, lengths, arc = cached
         step = grid.resolution
         along = np.arange(start, min(start + self.config.blocked_lookahead, arc[-1]), step)
         if len(along) == 0:
@@ -730,11 +737,8 @@ class ExplorerPolicy:
         fraction = (along - arc[index]) / np.maximum(lengths[index], 1e-12)
         points = path[index] + fraction[:, None] * segments[index]
         radius_cells = self.config.planner.robot_radius / grid.resolution
-        cells = grid.world_to_cell(points)[:, None, :] + _disk_offsets(radius_cells)[None]
-        cells = cells.reshape(-1, 2)
-        inside = grid.contains(cells)
-        cells = cells[inside]
-        if (grid.cells[cells[:, 0], cells[:, 1]] == OCCUPIED).any():  # not the whole grid
+        footprint = _disk_offsets(radius_cells)
+        if _footprint_meets(grid.cells, grid.world_to_cell(points), footprint, OCCUPIED):
             return True
         # Known teammates are already in the grid planning sees; sighted robots are not.
         robots = self._robots_in_the_way()
@@ -747,21 +751,10 @@ class ExplorerPolicy:
         """Whether too few of the target frontier's cells are still FREE next to UNKNOWN."""
         if len(self._target_cells) == 0:
             return False
-        cells = grid.world_to_cell(self._target_cells)
-        rows, cols = grid.shape
-        inside = grid.contains(cells)
-        if not inside.any():
+        inside, still = _still_frontier_cells(grid.cells, grid.world_to_cell(self._target_cells))
+        if inside == 0:
             return False
-        cells = cells[inside]
-        free = grid.cells[cells[:, 0], cells[:, 1]] == FREE  # the cells', not the whole grid's
-        near_unknown = np.zeros(len(cells), dtype=bool)
-        for d_row, d_col in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-            neighbours = cells + np.array([d_row, d_col])
-            outside = ~grid.contains(neighbours)
-            neighbours = np.clip(neighbours, 0, [rows - 1, cols - 1])
-            near_unknown |= outside | (grid.cells[neighbours[:, 0], neighbours[:, 1]] == UNKNOWN)
-        still = free & near_unknown
-        return bool(still.sum() < self.config.target_gone_fraction * len(self._target_cells))
+        return bool(still < self.config.target_gone_fraction * len(self._target_cells))
 
     def _set_target(self, point: FloatArray) -> None:
         """A new goal restarts the progress watchdog; keeping the same one does not."""
@@ -908,6 +901,43 @@ class ExplorerPolicy:
         utility += config.tie_jitter * self.rng.random(len(utility))
         best = int(np.argmax(utility))
         return best if np.isfinite(utility[best]) else -1
+
+
+@numba.njit(cache=True)
+def _footprint_meets(
+    cells: NDArray[np.int8], centres: IntArray, offsets: IntArray, value: np.int8
+) -> bool:
+    """Whether a cell of ``cells`` within the grid, at ``offsets`` (K, 2) from one of
+    ``centres`` (N, 2), holds ``value``."""
+    rows, cols = cells.shape
+    for i in range(len(centres)):
+        for k in range(len(offsets)):
+            row = centres[i, 0] + offsets[k, 0]
+            col = centres[i, 1] + offsets[k, 1]
+            if 0 <= row < rows and 0 <= col < cols and cells[row, col] == value:
+                return True
+    return False
+
+
+@numba.njit(cache=True)
+def _still_frontier_cells(cells: NDArray[np.int8], targets: IntArray) -> tuple[int, int]:
+    """Of the cells ``targets`` (K, 2): how many lie within the grid, and how many of those
+    are FREE with an UNKNOWN 4-neighbour (a neighbour beyond the grid counts as one)."""
+    rows, cols = cells.shape
+    inside = still = 0
+    for i in range(len(targets)):
+        row, col = targets[i, 0], targets[i, 1]
+        if not (0 <= row < rows and 0 <= col < cols):
+            continue
+        inside += 1
+        if cells[row, col] != FREE:
+            continue
+        for d_row, d_col in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            r, c = row + d_row, col + d_col
+            if not (0 <= r < rows and 0 <= c < cols) or cells[r, c] == UNKNOWN:
+                still += 1
+                break
+    return inside, still
 
 
 def _most_overlapping(labels: NDArray[np.int32], cells: IntArray) -> int:

@@ -179,8 +179,7 @@ def frontier_cells(
     """
     config = config if config is not None else FrontierConfig()
     unknown = _padded_unknown(grid, config.min_unknown_area)
-    structure = ndimage.generate_binary_structure(2, 1 if config.connectivity == 4 else 2)
-    near_unknown = ndimage.binary_dilation(unknown, structure=structure)[1:-1, 1:-1]
+    near_unknown = _dilated_inside(unknown, config.connectivity == 8)
     free = grid.free
     if config.min_free_width > 1:
         # Single beams through gaps leave one-cell-wide streaks of FREE in unknown space
@@ -194,6 +193,27 @@ def frontier_cells(
     if reachable is not None:
         cells &= _near_reachable(reachable, grid.resolution, config.max_goal_offset)
     return cells
+
+
+@numba.njit(cache=True)
+def _dilated_inside(padded: BoolArray, corners: bool) -> BoolArray:
+    """``ndimage.binary_dilation`` of ``padded`` by the cross (``corners``: the 3 x 3
+    square), without its one-cell border."""
+    rows, cols = padded.shape[0] - 2, padded.shape[1] - 2
+    out = np.empty((rows, cols), dtype=np.bool_)
+    for r in range(rows):
+        for c in range(cols):
+            near = (
+                padded[r + 1, c + 1]
+                or padded[r, c + 1]
+                or padded[r + 2, c + 1]
+                or padded[r + 1, c]
+                or padded[r + 1, c + 2]
+            )
+            if corners and not near:
+                near = padded[r, c] or padded[r, c + 2] or padded[r + 2, c] or padded[r + 2, c + 2]
+            out[r, c] = near
+    return out
 
 
 @numba.njit(cache=True)
@@ -273,23 +293,28 @@ def cluster_frontiers(
         return labels, 0
     min_cells = config.min_size / resolution
     max_cells = max(config.max_size / resolution, 1.0)
+    # Every component's cells at once, in row-major order within each component.
+    cell_rows, cell_cols = np.nonzero(components)
+    owner = components[cell_rows, cell_cols]
+    order = np.argsort(owner, kind="stable")
+    cell_rows, cell_cols, owner = cell_rows[order], cell_cols[order], owner[order]
+    bounds = np.searchsorted(owner, np.arange(1, count + 2))
     next_label = 1
-    for index, window in enumerate(ndimage.find_objects(components), start=1):
-        if window is None:
+    for index in range(count):
+        begin, end = bounds[index], bounds[index + 1]
+        if end - begin < min_cells:
             continue
-        local = np.argwhere(components[window] == index)
-        if len(local) < min_cells:
-            continue
-        pieces = math.ceil(len(local) / max_cells)
-        piece = np.zeros(len(local), dtype=np.int64)
+        rows, cols = cell_rows[begin:end], cell_cols[begin:end]
+        pieces = math.ceil((end - begin) / max_cells)
+        piece = np.zeros(end - begin, dtype=np.int64)
         if pieces > 1:
+            # Cell coordinates from the corner of the component's bounding box.
+            local = np.stack([rows - rows.min(), cols - cols.min()], axis=1)
             centred = local - local.mean(axis=0)
             # Principal axis of the cell cloud: the eigenvector of the largest eigenvalue.
             _, vectors = np.linalg.eigh(centred.T @ centred)
             order = np.argsort(centred @ vectors[:, -1], kind="stable")
             piece[order] = np.arange(len(local)) * pieces // len(local)
-        rows = local[:, 0] + window[0].start
-        cols = local[:, 1] + window[1].start
         labels[rows, cols] = next_label + piece
         next_label += pieces
     return labels, next_label - 1
@@ -357,6 +382,7 @@ def connected_information_gain(
     sensor_range: float,
     *,
     min_open_fraction: float = 0.0,
+    cells: tuple[IntArray, IntArray] | None = None,
 ) -> FloatArray:
     """Unknown area near each frontier's goal that the frontier actually opens onto.
 
@@ -379,6 +405,8 @@ def connected_information_gain(
         m.
     min_open_fraction : float
         In [0, 1].
+    cells : tuple of two int arrays, optional
+        ``np.nonzero(labels)``, if already known.
 
     Returns
     -------
@@ -394,7 +422,7 @@ def connected_information_gain(
     regions, region_count = ndimage.label(unknown)
     outside = regions[0, 0]
     # The unknown regions each frontier touches: labels of its cells' 4-neighbours.
-    frontier_rows, frontier_cols = np.nonzero(labels)
+    frontier_rows, frontier_cols = np.nonzero(labels) if cells is None else cells
     owner = labels[frontier_rows, frontier_cols] - 1
     touches = np.zeros((count, region_count + 1), dtype=bool)
     for d_row, d_col in ((1, 0), (-1, 0), (0, 1), (0, -1)):
@@ -409,10 +437,10 @@ def connected_information_gain(
     centres = grid.world_to_cell(points) + 1  # padded coordinates
     counts, sizes = _touched_in_squares(regions, touches, centres, half)
     for frontier in range(count):
-        cells = int(counts[frontier])
+        seen = int(counts[frontier])
         if outside and touches[frontier, outside]:
-            cells += box - int(sizes[frontier])  # the square's part beyond the padded grid
-        gains[frontier] = cells
+            seen += box - int(sizes[frontier])  # the square's part beyond the padded grid
+        gains[frontier] = seen
     return gains * grid.resolution**2
 
 
@@ -477,45 +505,37 @@ def _goal_cells(
     resolution: float,
     max_goal_offset: float,
     offset: tuple[int, int] = (0, 0),
+    cells: IntArray | None = None,
 ) -> tuple[IntArray, BoolArray]:
-    """Per frontier: the reachable cell nearest to its cell closest to its centroid.
+    """Per frontier: the reachable cell nearest to its cell closest to its centroid, among
+    its cells within ``max_goal_offset`` of reachable space.
 
-    If that cell is too far from anything reachable, the frontier cell nearest to the
-    reachable space is used instead; the frontier is invalid when even that is farther
-    than ``max_goal_offset``. ``labels`` and ``reachable`` may be a window of the map
+    A frontier with no such cell is invalid. ``labels`` and ``reachable`` may be a window of the map
     whose cell [0, 0] is the map's cell ``offset``; ``centroid_cells`` and the goal cells
-    returned are in the map's cells.
+    returned are in the map's cells; ``cells``, if given, is ``np.argwhere(labels > 0)``.
     """
     goal_cells = np.zeros((count, 2), dtype=np.int64)
     valid = np.zeros(count, dtype=bool)
     if count == 0 or not reachable.any():
         return goal_cells, valid
-    nearest = ndimage.distance_transform_edt(
-        ~reachable, return_distances=False, return_indices=True
-    )
-    cells = np.argwhere(labels > 0)
+    cells = np.argwhere(labels > 0) if cells is None else cells
     owner = labels[cells[:, 0], cells[:, 1]] - 1
     to_centroid = ((cells + np.asarray(offset) - centroid_cells[owner]) ** 2).sum(axis=1)
-    # The distances at the frontier cells only, as the transform computes them everywhere.
-    steps = (nearest[:, cells[:, 0], cells[:, 1]] - cells.T.astype(np.int32)).astype(np.float64)
-    to_reachable = np.sqrt(np.add.reduce(steps * steps, axis=0)) * resolution
-    # The middle cell when it is close enough to reachable space, else the closest cell.
-    middle_ok = to_reachable <= max_goal_offset
-    key = np.where(middle_ok, to_centroid, np.inf)
-    fallback = np.where(middle_ok, np.inf, to_reachable)
-    for frontier in range(count):
-        mine = np.flatnonzero(owner == frontier)
-        if len(mine) == 0:
-            continue
-        if np.isfinite(key[mine]).any():
-            best = mine[np.argmin(key[mine])]
-        else:
-            best = mine[np.argmin(fallback[mine])]
-            if to_reachable[best] > max_goal_offset:
-                continue
-        row, col = cells[best]
-        goal_cells[frontier] = (nearest[0][row, col] + offset[0], nearest[1][row, col] + offset[1])
-        valid[frontier] = True
+    # The nearest reachable cell at the frontier cells only (the transform scipy's
+    # distance_transform_edt would compute everywhere, ties broken as it does).
+    nearest = _nearest_feature_at(reachable, cells)
+    steps = (nearest - cells).astype(np.float64)
+    to_reachable = np.sqrt(steps[:, 0] * steps[:, 0] + steps[:, 1] * steps[:, 1]) * resolution
+    # The cell closest to the middle among those close enough to reachable space (the
+    # first in row-major order on a tie); a frontier with none is dropped (even its cell
+    # closest to reachable space is farther than max_goal_offset).
+    key = np.where(to_reachable <= max_goal_offset, to_centroid, np.inf)
+    order = np.lexsort((key, owner))  # stable: ties keep the row-major order
+    first = order[np.flatnonzero(np.diff(owner[order], prepend=-1))]
+    chosen = first[np.isfinite(key[first])]
+    frontiers = owner[chosen]
+    goal_cells[frontiers] = nearest[chosen] + np.asarray(offset)
+    valid[frontiers] = True
     return goal_cells, valid
 
 
@@ -571,10 +591,10 @@ def extract_frontiers(
     reach = reach[rows, cols]
     cells = frontier_cells(window, config)
     labels, count = cluster_frontiers(cells, grid.resolution, config)
-    frontier_rows, frontier_cols = np.nonzero(labels)
-    owner = labels[frontier_rows, frontier_cols]
-    frontier_rows = frontier_rows + offset[0]
-    frontier_cols = frontier_cols + offset[1]
+    window_rows, window_cols = np.nonzero(labels)
+    owner = labels[window_rows, window_cols]
+    frontier_rows = window_rows + offset[0]
+    frontier_cols = window_cols + offset[1]
     sizes = np.bincount(owner, minlength=count + 1)[1:].astype(np.float64)
     safe = np.maximum(sizes, 1.0)
     centroid_cells = np.stack(
@@ -585,7 +605,14 @@ def extract_frontiers(
         axis=1,
     ).reshape(-1, 2)
     goal_cells, valid = _goal_cells(
-        labels, count, centroid_cells, reach, grid.resolution, config.max_goal_offset, offset
+        labels,
+        count,
+        centroid_cells,
+        reach,
+        grid.resolution,
+        config.max_goal_offset,
+        offset,
+        np.stack([window_rows, window_cols], axis=1),
     )
     order = np.flatnonzero(valid)
     order = order[np.argsort(-sizes[order], kind="stable")]
@@ -596,7 +623,14 @@ def extract_frontiers(
     if config.gain_model == "box":
         gains = information_gain(grid, goals, config.sensor_range)
     else:
-        gains = connected_information_gain(window, labels, goals, config.sensor_range)
+        kept = labels[window_rows, window_cols] > 0  # the valid frontiers' cells
+        gains = connected_information_gain(
+            window,
+            labels,
+            goals,
+            config.sensor_range,
+            cells=(window_rows[kept], window_cols[kept]),
+        )
     gains = np.minimum(gains, sizes[order] * grid.resolution * config.view_depth)
     if labels.shape != grid.shape:
         full_labels = np.zeros(grid.shape, dtype=np.int32)
@@ -610,3 +644,73 @@ def extract_frontiers(
         goals=goals,
         gains=gains,
     )
+
+
+@numba.njit(cache=True)
+def _nearest_feature_at(features: BoolArray, cells: IntArray) -> IntArray:
+    """The nearest ``True`` cell ``(row, col)`` of each of ``cells`` (K, 2), row-major
+    sorted, as ``ndimage.distance_transform_edt(~features, return_indices=True)`` gives
+    it, ties included: the same exact algorithm (Maurer, Qi and Raghavan 2003), a pass
+    along each column then one along each row, in integers, the row pass only on the
+    rows of ``cells``. Needs one ``True`` cell at least."""
+    rows, cols = features.shape
+    # Per column, for each row: the nearest feature row in the column (ties: the lower
+    # row), or -1 when the column has none; from the last feature at or above and the
+    # first at or below.
+    above = np.empty((rows, cols), dtype=np.int32)
+    below = np.empty((rows, cols), dtype=np.int32)
+    for c in range(cols):  # row by row, for the cache
+        above[0, c] = 0 if features[0, c] else -1
+        below[rows - 1, c] = rows - 1 if features[rows - 1, c] else -1
+    for r in range(1, rows):
+        for c in range(cols):
+            above[r, c] = r if features[r, c] else above[r - 1, c]
+    for r in range(rows - 2, -1, -1):
+        for c in range(cols):
+            below[r, c] = r if features[r, c] else below[r + 1, c]
+    out = np.empty((len(cells), 2), dtype=np.int64)
+    sites = np.empty(cols, dtype=np.int64)  # the columns of the envelope's sites
+    site_row = np.empty(cols, dtype=np.int64)
+    k = 0
+    while k < len(cells):
+        r = cells[k, 0]
+        # The column pass's feature at (r, c) for every column c.
+        top = -1
+        for c in range(cols):
+            up, down = np.int64(above[r, c]), np.int64(below[r, c])
+            if up < 0:
+                feature = down
+            elif down < 0 or r - up <= down - r:
+                feature = up
+            else:
+                feature = down
+            if feature < 0:
+                continue
+            # Drop the sites the new one hides along this row (the lower envelope).
+            w = (feature - r) ** 2
+            while top >= 1:
+                a = sites[top] - sites[top - 1]
+                b = c - sites[top]
+                u = (site_row[top - 1] - r) ** 2
+                v = (site_row[top] - r) ** 2
+                if (a + b) * v - b * u - a * w - a * b * (a + b) <= 0:
+                    break
+                top -= 1
+            top += 1
+            sites[top] = c
+            site_row[top] = feature
+        # Query the row's cells left to right: advance while the next site is closer.
+        at = 0
+        while k < len(cells) and cells[k, 0] == r:
+            c = cells[k, 1]
+            here = (site_row[at] - r) ** 2 + (sites[at] - c) ** 2
+            while at < top:
+                there = (site_row[at + 1] - r) ** 2 + (sites[at + 1] - c) ** 2
+                if here <= there:
+                    break
+                here = there
+                at += 1
+            out[k, 0] = site_row[at]
+            out[k, 1] = sites[at]
+            k += 1
+    return out

@@ -396,16 +396,17 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         covered before this step.
         """
         grid = self._coverage_template
-        team_before = self._team_observed.copy()
+        # The cells each robot covers for the first time, as flat indices of the grid.
         newly_covered = []
         if self._slams:
             area = self._update_slam(state)
+            cols = grid.shape[1]
             for i, cells in enumerate(self._newly_known_world_cells):
-                fresh = np.zeros_like(team_before)
-                fresh[cells[:, 0], cells[:, 1]] = True
-                fresh &= ~self._observed[i]
-                self._observed[i] |= fresh
-                newly_covered.append(fresh)
+                observed = self._observed[i].reshape(-1)  # a view
+                flat = np.unique(cells[:, 0] * cols + cells[:, 1])
+                flat = flat[~observed[flat]]
+                observed[flat] = True
+                newly_covered.append(flat)
         else:
             area = np.zeros(len(self.possible_agents))
             for i, (pose, scan) in enumerate(zip(state.true_poses, state.scans, strict=True)):
@@ -421,12 +422,14 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
                     scan,
                 )
                 area[i] = new_cells * grid.resolution**2
-                newly_covered.append(self._observed[i] & ~before)
+                newly_covered.append(np.flatnonzero(self._observed[i] & ~before))
             self._observed_area += area
         cell_area = grid.resolution**2
-        for i, fresh in enumerate(newly_covered):
-            self._team_new_area[i] = float((fresh & ~team_before).sum()) * cell_area
-            self._team_observed |= fresh
+        team = self._team_observed.reshape(-1)  # a view
+        team_before = [team[flat] for flat in newly_covered]  # before any robot's update
+        for i, (flat, known) in enumerate(zip(newly_covered, team_before, strict=True)):
+            self._team_new_area[i] = float(len(flat) - np.count_nonzero(known)) * cell_area
+            team[flat] = True
         self._new_area = area
         return area
 
@@ -451,8 +454,15 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
                 continue
             ever = self._ever_known_aligned(i, slam.grid)
             config = grid.config
+            # ``ever`` holds every cell known before this scan: only the cells it wrote
+            # can be new.
+            candidates = slam.grid.last_written if slam.n_integrated == integrated + 1 else None
             cells = mark_newly_known(
-                slam.grid.log_odds, ever, config.free_threshold, config.occupied_threshold
+                slam.grid.log_odds,
+                ever,
+                config.free_threshold,
+                config.occupied_threshold,
+                candidates,
             )
             grid = slam.grid
             area[i] = len(cells) * grid.resolution**2

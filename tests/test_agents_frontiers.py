@@ -8,6 +8,8 @@ from scipy import ndimage
 
 from agents.frontiers import (
     FrontierConfig,
+    _dilated_inside,
+    _nearest_feature_at,
     _open_square,
     cluster_frontiers,
     connected_information_gain,
@@ -239,3 +241,48 @@ def test_the_square_opening_is_scipys(width: int) -> None:
             mask = rng.random((int(rng.integers(1, 30)), int(rng.integers(1, 30)))) < density
             expected = ndimage.binary_opening(mask, structure=np.ones((width, width), dtype=bool))
             np.testing.assert_array_equal(_open_square(mask, width // 2), expected)
+
+
+def test_the_nearest_feature_is_scipys_ties_included() -> None:
+    # The goal step's nearest reachable cell against ndimage's feature transform, at all
+    # cells and at random subsets, on masks from one cell to dense, with many ties.
+    rng = np.random.default_rng(7)
+    for density in (0.005, 0.05, 0.3, 0.9):
+        for _ in range(60):
+            shape = (int(rng.integers(1, 35)), int(rng.integers(1, 35)))
+            features = rng.random(shape) < density
+            features[tuple(rng.integers(0, shape))] = True
+            rows, cols = ndimage.distance_transform_edt(
+                ~features, return_distances=False, return_indices=True
+            )
+            everywhere = np.argwhere(np.ones(shape, dtype=bool))
+            some = everywhere[rng.random(len(everywhere)) < rng.random()]
+            for cells in (everywhere, some):
+                expected = np.stack([rows[tuple(cells.T)], cols[tuple(cells.T)]], axis=1)
+                np.testing.assert_array_equal(_nearest_feature_at(features, cells), expected)
+
+
+def test_long_frontier_pieces_and_goals_do_not_depend_on_where_the_map_lies() -> None:
+    # The same room placed at another offset in a larger grid: the same frontiers,
+    # shifted (the clustering works in each component's own box).
+    grid = room_with_door(2.5)
+    config = FrontierConfig(max_size=0.5)
+    base = extract_frontiers(grid, config)
+    cells = np.full((160, 190), UNKNOWN, dtype=np.int8)
+    cells[37:137, 51:171] = grid.cells
+    moved = extract_frontiers(GridMap(cells=cells, resolution=RESOLUTION), config)
+    assert len(base) > 3 and len(moved) == len(base)
+    np.testing.assert_array_equal(moved.goal_cells, base.goal_cells + np.array([37, 51]))
+    np.testing.assert_array_equal(moved.sizes, base.sizes)
+    np.testing.assert_array_equal(moved.labels[37:137, 51:171], base.labels)
+
+
+@pytest.mark.parametrize("corners", [False, True])
+def test_the_dilation_next_to_unknown_is_scipys(corners: bool) -> None:
+    rng = np.random.default_rng(11)
+    structure = ndimage.generate_binary_structure(2, 2 if corners else 1)
+    for density in (0.02, 0.2, 0.6):
+        for _ in range(40):
+            padded = rng.random((int(rng.integers(2, 30)), int(rng.integers(2, 30)))) < density
+            expected = ndimage.binary_dilation(padded, structure=structure)[1:-1, 1:-1]
+            np.testing.assert_array_equal(_dilated_inside(padded, corners), expected)

@@ -32,6 +32,7 @@ from mrslam_env.slam.grid import (
     OccupancyGrid,
     facing_sectors,
     gaussian_kernels,
+    mark_newly_known,
     sector_of,
 )
 from mrslam_env.slam.matcher import interpolate
@@ -338,6 +339,53 @@ def test_the_grid_grows_without_moving_cells(direction: tuple[int, int]) -> None
     grid.integrate_scan(in_map, noisy_scan(world, pose, rng), 8.0)
     assert_fields_consistent(grid)
     assert grid.known_cells == (grid.to_gridmap().cells != UNKNOWN).sum()
+
+
+@pytest.mark.parametrize("capacity", [None, 50])
+def test_the_written_cells_keep_the_view_and_the_newly_known_cells_exact(
+    capacity: int | None,
+) -> None:
+    # Scans that grow the grid, with the kept trinary view and the newly known cells from
+    # the written cells against a full pass each step; capacity 50: too many writes to
+    # list, so every cell counts as possibly changed.
+    rng = np.random.default_rng(5)
+    world = box_room(9.0, 5.0)
+    grid = OccupancyGrid(GridConfig(growth_chunk=32))
+    if capacity is not None:
+        grid._written = np.empty(capacity, dtype=np.int64)
+    config = grid.config
+    ever_full = np.zeros(grid.shape, dtype=bool)
+    ever_listed = np.zeros(grid.shape, dtype=bool)
+    grid.to_gridmap()  # from now on the view is kept current
+    start = np.array([1.0, 1.0, 0.0])
+    for step in range(30):
+        pose = np.array([1.0 + 0.25 * step, 1.0 + 0.08 * step, 0.2 * step])
+        shape, origin = grid.shape, grid.origin
+        grid.integrate_scan(compose(inverse(start), pose), noisy_scan(world, pose, rng), 8.0)
+        if grid.shape != shape:  # grow the masks with the grid, as the env does
+            dy = round((origin[1] - grid.origin[1]) / grid.resolution)
+            dx = round((origin[0] - grid.origin[0]) / grid.resolution)
+            for name, mask in (("full", ever_full), ("listed", ever_listed)):
+                grown = np.zeros(grid.shape, dtype=bool)
+                grown[dy : dy + shape[0], dx : dx + shape[1]] = mask
+                if name == "full":
+                    ever_full = grown
+                else:
+                    ever_listed = grown
+        written = grid.last_written
+        assert (written is None) == (capacity is not None)
+        thresholds = (config.free_threshold, config.occupied_threshold)
+        full = mark_newly_known(grid.log_odds, ever_full, *thresholds)
+        listed = mark_newly_known(grid.log_odds, ever_listed, *thresholds, written)
+        np.testing.assert_array_equal(listed, full, err_msg=f"step {step}")
+        np.testing.assert_array_equal(ever_listed, ever_full)
+        expected = np.full(grid.shape, UNKNOWN, dtype=np.int8)
+        expected[grid.log_odds < np.float32(config.free_threshold)] = FREE
+        expected[grid.log_odds > np.float32(config.occupied_threshold)] = OCCUPIED
+        view = grid.to_gridmap()
+        np.testing.assert_array_equal(view.cells, expected, err_msg=f"step {step}")
+        assert view.origin == grid.origin
+    assert grid.shape != (32, 32) and ever_full.sum() > 1000
 
 
 def test_to_gridmap_is_the_trinary_view() -> None:

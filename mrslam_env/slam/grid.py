@@ -76,6 +76,10 @@ __all__ = [
     "sector_of",
 ]
 
+WRITTEN_CAPACITY = 1 << 16
+"""Log-odds writes of one scan that :attr:`OccupancyGrid.last_written` lists (a scan of
+360 beams writes a few thousand; more and every cell counts as possibly changed)."""
+
 KERNEL_SCALE = 1024.0
 """Peak weight of a likelihood-field kernel; weights are rounded to integers."""
 
@@ -301,7 +305,8 @@ def integrate_scan(
     occupied_threshold: float,
     free_threshold: float,
     surface_margin: float,
-) -> tuple[int, int]:
+    written: NDArray[np.int64],
+) -> tuple[int, int, int]:
     """Integrate one scan into a log-odds grid and its likelihood fields (in place).
 
     Parameters
@@ -355,6 +360,9 @@ def integrate_scan(
         m: misses of a returning beam within this distance of the surface it ends on
         (across the surface, from the return's normal; along the beam at most
         ``SURFACE_ZONE_CELLS`` cells) leave ``surface_odds`` alone in cells that hold hits.
+    written : ndarray, shape (W,), int64
+        Out: the flat indices (``row * cols + col``) of the cells whose log-odds were
+        written, in order, repeats included; only the first W are stored.
 
     Returns
     -------
@@ -363,12 +371,17 @@ def integrate_scan(
     newly_known : int
         The net change in the number of known cells (FREE or OCCUPIED in the trinary
         view): cells that became known minus cells that went back to UNKNOWN.
+    n_written : int
+        How many log-odds writes there were (all of them listed in ``written`` when at
+        most W).
     """
     rows, cols = log_odds.shape
     n = ranges.shape[0]
     dtheta = 2.0 * math.pi / n
     flips = 0
     newly_known = 0
+    n_written = 0
+    capacity = written.shape[0]
     # Pass 1: mark the end cell of every returning beam.
     for i in range(n):
         r = ranges[i]
@@ -432,6 +445,9 @@ def integrate_scan(
                 continue
             after = np.float32(max(before + log_odds_miss, log_odds_min))
             log_odds[iy, ix] = after
+            if n_written < capacity:
+                written[n_written] = iy * cols + ix
+            n_written += 1
             newly_known += _is_known(after, free_threshold, occupied_threshold) - _is_known(
                 before, free_threshold, occupied_threshold
             )
@@ -468,6 +484,9 @@ def integrate_scan(
         before = log_odds[iy, ix]
         after = np.float32(min(max(before + log_odds_hit, log_odds_min), log_odds_max))
         log_odds[iy, ix] = after
+        if n_written < capacity:
+            written[n_written] = iy * cols + ix
+        n_written += 1
         newly_known += _is_known(after, free_threshold, occupied_threshold) - _is_known(
             before, free_threshold, occupied_threshold
         )
@@ -496,7 +515,7 @@ def integrate_scan(
                     fine_fields, coarse_field, fine_kernels, coarse_kernels, stamp_index,
                     sector_mask, iy, ix, new_index, mask,
                 )  # fmt: skip
-    return flips, newly_known
+    return flips, newly_known, n_written
 
 
 class OccupancyGrid:
@@ -542,6 +561,11 @@ class OccupancyGrid:
         self._sector_mask = np.zeros(shape, dtype=np.uint8)
         self._fine_fields = np.zeros((SECTORS, *shape), dtype=np.float32)
         self._coarse_field = np.zeros((1, *shape), dtype=np.float32)
+        # The cells the last scan wrote (flat indices), and the trinary view kept current
+        # from them once :meth:`to_gridmap` has built it (None before).
+        self._written = np.empty(WRITTEN_CAPACITY, dtype=np.int64)
+        self._n_written = 0
+        self._cells: NDArray[np.int8] | None = None
 
     # --- placement ----------------------------------------------------------------------
 
@@ -620,18 +644,32 @@ class OccupancyGrid:
         """Cells whose log-odds exceed ``occupied_threshold`` (rows, cols)."""
         return self._log_odds > self.config.occupied_threshold
 
+    @property
+    def last_written(self) -> NDArray[np.int64] | None:
+        """Flat indices (``row * cols + col``, repeats included) of the cells whose
+        log-odds the last :meth:`integrate_scan` wrote: the only cells whose trinary
+        value can have changed since the call before. None when there were too many to
+        list (then any cell may have changed), empty before the first scan."""
+        if self._n_written > len(self._written):
+            return None
+        return self._read_only(self._written[: self._n_written])
+
     def to_gridmap(self) -> GridMap:
         """The trinary view: OCCUPIED above ``occupied_threshold``, FREE below
-        ``free_threshold``, else UNKNOWN, placed in the grid's frame."""
-        # One pass instead of three (a teammate reads its map every step); the cells hold
-        # the three values by construction, so GridMap's value check is skipped. The
-        # thresholds go in as float32, as numpy compares the float32 log-odds with them.
-        cells = _trinary(
-            self._log_odds,
-            np.float32(self.config.free_threshold),
-            np.float32(self.config.occupied_threshold),
+        ``free_threshold``, else UNKNOWN, placed in the grid's frame (a copy)."""
+        # A teammate reads its map every step: the view is built once (one pass) and
+        # then kept current from the cells each scan writes, so a read is a copy. The
+        # cells hold the three values by construction: GridMap's value check is skipped.
+        if self._cells is None:
+            self._cells = self._trinary_of(self._log_odds)
+        return GridMap.trusted(self._cells.copy(), self.resolution, self.origin)
+
+    def _trinary_of(self, log_odds: Float32Array) -> NDArray[np.int8]:
+        # The thresholds go in as float32, as numpy compares the float32 log-odds with them.
+        config = self.config
+        return _trinary(
+            log_odds, np.float32(config.free_threshold), np.float32(config.occupied_threshold)
         )
-        return GridMap(cells=cells, resolution=self.resolution, origin=self.origin)
 
     # --- growth -------------------------------------------------------------------------
 
@@ -678,6 +716,8 @@ class OccupancyGrid:
         self._sector_mask = grown(self._sector_mask)
         self._fine_fields = grown(self._fine_fields, leading=1)
         self._coarse_field = grown(self._coarse_field, leading=1)
+        if self._cells is not None:
+            self._cells = grown(self._cells, -1)  # UNKNOWN
         self._origin_index = (
             self._origin_index[0] - add_bottom,
             self._origin_index[1] - add_left,
@@ -724,7 +764,7 @@ class OccupancyGrid:
         self.ensure_contains(*scan_extent(x, y, heading, scan, max_range, config.min_range, clear))
         self._scan_id += 1
         x0, y0 = self.origin
-        flips, newly_known = integrate_scan(
+        flips, newly_known, self._n_written = integrate_scan(
             self._log_odds,
             self._surface_odds,
             self._hit_marks,
@@ -755,8 +795,21 @@ class OccupancyGrid:
             config.occupied_threshold,
             config.free_threshold,
             config.surface_margin,
+            self._written,
         )
         self.known_cells += int(newly_known)
+        if self._cells is not None:
+            written = self.last_written
+            if written is None:
+                self._cells = self._trinary_of(self._log_odds)
+            else:
+                _update_trinary(
+                    self._cells,
+                    self._log_odds,
+                    written,
+                    np.float32(config.free_threshold),
+                    np.float32(config.occupied_threshold),
+                )
         return flips
 
 
@@ -781,6 +834,27 @@ def _trinary(
 
 
 @numba.njit(cache=True)
+def _update_trinary(
+    cells: NDArray[np.int8],
+    log_odds: Float32Array,
+    flat: NDArray[np.int64],
+    free_below: np.float32,
+    occupied_above: np.float32,
+) -> None:
+    """``cells`` (the trinary view, as :func:`_trinary`) made current at the flat indices."""
+    cols = log_odds.shape[1]
+    for index in flat:
+        row, col = index // cols, index % cols
+        value = log_odds[row, col]
+        if value > occupied_above:
+            cells[row, col] = OCCUPIED
+        elif value < free_below:
+            cells[row, col] = FREE
+        else:
+            cells[row, col] = UNKNOWN
+
+
+@numba.njit(cache=True)
 def _mark_newly_known(
     log_odds: NDArray[np.float32],
     ever: NDArray[np.bool_],
@@ -801,11 +875,33 @@ def _mark_newly_known(
     return count
 
 
+@numba.njit(cache=True)
+def _mark_newly_known_at(
+    log_odds: NDArray[np.float32],
+    ever: NDArray[np.bool_],
+    free_threshold: float,
+    occupied_threshold: float,
+    candidates: NDArray[np.int64],
+    flat_out: NDArray[np.int64],
+) -> int:
+    cols = log_odds.shape[1]
+    count = 0
+    for index in candidates:
+        row, col = index // cols, index % cols
+        value = log_odds[row, col]
+        if (value < free_threshold or value > occupied_threshold) and not ever[row, col]:
+            ever[row, col] = True
+            flat_out[count] = index
+            count += 1
+    return count
+
+
 def mark_newly_known(
     log_odds: NDArray[Any],
     ever: NDArray[np.bool_],
     free_threshold: float,
     occupied_threshold: float,
+    candidates: NDArray[np.int64] | None = None,
 ) -> NDArray[np.int64]:
     """Cells known (log-odds beyond a threshold) that ``ever`` has not marked yet; marks them.
 
@@ -818,12 +914,24 @@ def mark_newly_known(
         Updated in place.
     free_threshold, occupied_threshold : float
         Known means ``< free_threshold`` or ``> occupied_threshold``.
+    candidates : ndarray of int64, optional
+        Flat indices (``row * cols + col``, repeats allowed) of the only cells that can
+        be known and unmarked, e.g. :attr:`OccupancyGrid.last_written` when ``ever``
+        marked every known cell before that scan; only they are looked at. None: the
+        whole grid.
 
     Returns
     -------
     ndarray of int64, shape (k, 2)
         ``[row, col]`` of the newly known cells, row-major order.
     """
+    if candidates is not None:
+        flat = np.empty(len(candidates), dtype=np.int64)
+        count = _mark_newly_known_at(
+            log_odds, ever, float(free_threshold), float(occupied_threshold), candidates, flat
+        )
+        rows, cols = np.divmod(np.sort(flat[:count]), log_odds.shape[1])
+        return np.column_stack([rows, cols])
     size = log_odds.size
     rows, cols = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
     count = _mark_newly_known(

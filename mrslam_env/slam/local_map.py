@@ -80,20 +80,39 @@ def egocentric_crop(
     # Thresholds in float32, as numpy compares the float32 grid (GridMap's trinary view).
     free = np.float32(free_threshold)
     occupied = np.float32(occupied_threshold)
-    for r in range(cells):
-        for k in range(cells):
-            for a in range(pool):
-                ly = (r - half) * cell_size + (a + 0.5) * step
-                for b in range(pool):
-                    lx = (k - half) * cell_size + (b + 0.5) * step
-                    ix = math.floor((x + c * lx - s * ly - origin_x) / resolution)
-                    iy = math.floor((y + s * lx + c * ly - origin_y) / resolution)
-                    if 0 <= iy < rows and 0 <= ix < cols:
-                        value = log_odds[iy, ix]
-                        if value > occupied:
-                            out[OCCUPIED_CHANNEL, r, k] = 1
-                        elif value < free:
-                            out[FREE_CHANNEL, r, k] = 1
+    # The samples' offsets along each axis and their rotated parts, once (the same
+    # products and sums, in the same order, as sample by sample); then a row of samples
+    # at a time, the cell indices first (a loop that vectorises), the lookups after.
+    n = cells * pool
+    along_x = np.empty(n)  # x + c * lx
+    along_y = np.empty(n)  # y + s * lx
+    across_x = np.empty(n)  # s * ly
+    across_y = np.empty(n)  # c * ly
+    for k in range(cells):
+        for b in range(pool):
+            offset = (k - half) * cell_size + (b + 0.5) * step
+            along_x[k * pool + b] = x + c * offset
+            along_y[k * pool + b] = y + s * offset
+            across_x[k * pool + b] = s * offset
+            across_y[k * pool + b] = c * offset
+    column = np.arange(n) // pool  # the output column of each sample
+    gx = np.empty(n)
+    gy = np.empty(n)
+    for i in range(n):
+        sy = across_x[i]
+        cy = across_y[i]
+        for j in range(n):
+            gx[j] = (along_x[j] - sy - origin_x) / resolution
+            gy[j] = (along_y[j] + cy - origin_y) / resolution
+        r = i // pool
+        for j in range(n):
+            # Below 0 is outside the map; from 0 up, truncation is the floor.
+            if 0.0 <= gx[j] < cols and 0.0 <= gy[j] < rows:
+                value = log_odds[int(gy[j]), int(gx[j])]
+                if value > occupied:
+                    out[OCCUPIED_CHANNEL, r, column[j]] = 1
+                elif value < free:
+                    out[FREE_CHANNEL, r, column[j]] = 1
     return out
 
 
