@@ -11,6 +11,7 @@ import pytest
 from agents.follower import (
     FollowerConfig,
     PathFollower,
+    guard_speed,
     lane_clearance,
     limit_rates,
     lookahead_target,
@@ -134,6 +135,93 @@ def test_the_clearance_guard_stops_forward_motion_but_allows_turning() -> None:
         action = follower.step(np.array([0.0, 0.0, 0.0]), clearance=(0.05, np.inf))
     assert action[0] == 0.0
     assert action[1] > 0.0
+
+
+ANGLES = -np.pi + np.arange(360) * (2 * np.pi / 360)
+
+
+def wall_ahead(distance: float) -> np.ndarray:
+    """A scan (360 beams) of a wall across the heading ``distance`` m from the centre,
+    nothing else within 8 m."""
+    with np.errstate(divide="ignore"):
+        ranges = np.where(np.cos(ANGLES) > 0, distance / np.cos(ANGLES), np.inf)
+    return np.minimum(ranges, 8.0)
+
+
+def test_guard_speed_stops_within_half_the_gap_less_the_margin() -> None:
+    config = FollowerConfig()
+    a, dt, margin = ACCELERATION, DT, config.stop_distance
+    assert (config.max_acceleration, config.dt) == (a, dt)  # the env's robot and period
+    assert guard_speed(margin, config) == 0.0
+    assert guard_speed(0.0, config) == 0.0
+    assert guard_speed(-0.1, config) == 0.0  # touching already: no closer
+    assert guard_speed(np.inf, config) == np.inf
+    speeds = [guard_speed(gap, config) for gap in (0.15, 0.3, 0.6, 1.2)]
+    assert speeds == sorted(speeds) and speeds[0] > 0.0
+    for gap, v in zip((0.15, 0.3, 0.6, 1.2), speeds, strict=True):
+        assert v * dt + v * v / (2 * a) == pytest.approx((gap - margin) / 2)
+    # A robot that brakes harder may drive faster at the same gap.
+    assert guard_speed(0.3, FollowerConfig(max_acceleration=4.0)) > speeds[1]
+
+
+def test_a_return_close_ahead_slows_the_command_and_a_clear_scan_leaves_it() -> None:
+    path = np.array([[0.0, 0.0], [6.0, 0.0]])
+    pose = np.array([0.0, 0.0, 0.0])
+    free, guarded, close = PathFollower(), PathFollower(), PathFollower()
+    for follower in (free, guarded, close):
+        follower.set_path(path)
+    clear = lane_clearance(np.full(360, 8.0), ANGLES, 0.2)
+    near = lane_clearance(wall_ahead(0.6), ANGLES, 0.2)  # a 0.4 m gap
+    for _ in range(15):  # up to cruise speed
+        unguarded = free.step(pose)
+        assert np.array_equal(guarded.step(pose, clearance=clear), unguarded)
+        slowed = close.step(pose, clearance=near)
+    assert unguarded[0] * MAX_SPEED == pytest.approx(free.config.cruise_speed, abs=1e-6)
+    assert slowed[0] * MAX_SPEED == pytest.approx(guard_speed(0.4, close.config), abs=1e-6)
+    assert slowed[0] < 0.8 * unguarded[0]
+    # A return in the margin stops it; backing up is capped by the gap behind alike.
+    assert close.step(pose, clearance=(0.08, np.inf))[0] == 0.0
+
+
+def run_towards(obstacle_x: float, other_path: np.ndarray | None, steps: int = 120) -> float:
+    """Drive robot A east along y = 0 towards a wall at ``obstacle_x`` (or, with
+    ``other_path``, towards robot B following that path westwards under the same rule) in
+    the kinematic model; return the smallest gap between footprints and walls seen."""
+    radius = 0.2
+    robots = [PathFollower()]
+    robots[0].set_path(np.array([[0.0, 0.0], [obstacle_x + 5.0, 0.0]]))
+    poses = [np.array([0.0, 0.0, 0.0])]
+    if other_path is not None:
+        robots.append(PathFollower())
+        robots[1].set_path(other_path)
+        poses.append(np.array([*other_path[0], math.pi]))
+    velocities = [np.zeros(2) for _ in robots]
+    smallest = math.inf
+    for _ in range(steps):
+        actions = []
+        for i, follower in enumerate(robots):
+            # The lidar's view: the wall, or the other robot's disc, along the heading.
+            if other_path is None:
+                gap = obstacle_x - poses[0][0] - radius
+            else:
+                gap = float(np.hypot(*(poses[1][:2] - poses[0][:2]))) - 2 * radius
+            actions.append(follower.step(poses[i], clearance=(gap, np.inf)))
+        for i, action in enumerate(actions):
+            poses[i], velocities[i] = unicycle_step(poses[i], velocities[i], action)
+        if other_path is None:
+            smallest = min(smallest, obstacle_x - poses[0][0] - radius)
+        else:
+            smallest = min(smallest, float(np.hypot(*(poses[1][:2] - poses[0][:2]))) - 2 * radius)
+    return smallest
+
+
+def test_the_guard_keeps_a_robot_off_an_unmapped_wall_and_two_robots_apart() -> None:
+    # A wall 3 m ahead that the path runs through (the map does not show it).
+    gap = run_towards(3.0, None)
+    assert 0.0 < gap <= PathFollower().config.stop_distance + 1e-9
+    # Head-on in a corridor: both drive through where the other one is, at cruise speed.
+    gap = run_towards(0.0, np.array([[4.0, 0.0], [-5.0, 0.0]]))
+    assert gap > 0.0
 
 
 def test_lookahead_target_moves_forward_along_the_path() -> None:
