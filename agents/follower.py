@@ -331,15 +331,23 @@ def guard_speed(gap: float, config: FollowerConfig) -> float:
 
 
 def escape_command(
-    scan: ArrayLike, angles: ArrayLike, robot_radius: float, *, step_deg: float = 10.0
+    scan: ArrayLike,
+    angles: ArrayLike,
+    robot_radius: float,
+    *,
+    step_deg: float = 10.0,
+    config: FollowerConfig | None = None,
 ) -> NDArray[np.float32]:
     """A reactive way out when the planner cannot help (no passable cell near the robot,
     or the scan keeps stopping it where the map shows no wall, e.g. at a desk corner seen
     only edge-on): turn towards the heading whose lane (the strip the footprint sweeps)
-    is clearest, and creep forward once facing it with room ahead.
+    is clearest, and creep forward (at most 0.25 of full speed) once facing it, no faster
+    than the braking guard allows (:func:`guard_speed` with ``config``: the robot's
+    figures; default the default env's).
 
     Returns the normalised ``(v, omega)`` (float32, (2,)).
     """
+    config = config if config is not None else FollowerConfig()
     ranges = np.asarray(scan, dtype=np.float64)
     beam_angles = np.asarray(angles, dtype=np.float64)
     candidates = np.radians(np.arange(-180.0, 180.0, step_deg))
@@ -354,7 +362,9 @@ def escape_command(
     direction = float(candidates[good][np.argmin(np.abs(candidates[good]))])
     front = float(clear[np.argmin(np.abs(candidates))])
     turn = float(np.clip(direction / (math.pi / 4), -1.0, 1.0))
-    forward = 0.25 if abs(direction) <= math.radians(step_deg) and front > 0.15 else 0.0
+    forward = 0.0
+    if abs(direction) <= math.radians(step_deg):
+        forward = min(0.25, guard_speed(front, config) / config.max_speed)
     return np.array([forward, turn], dtype=np.float32)
 
 

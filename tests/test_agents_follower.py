@@ -316,3 +316,10 @@ def test_escape_turns_to_the_clearest_lane_and_creeps_out() -> None:
     open_ahead = np.where(x < -0.5, 0.3, 8.0)
     v, omega = escape_command(open_ahead, angles, 0.2)
     assert v > 0.0 and abs(omega) < 0.3
+    # In a pocket (every lane as short) it creeps out as the braking guard allows: slower
+    # the tighter, not at all with the return within the margin.
+    gaps = (0.3, 0.13, 0.09)  # beyond the footprint
+    creeps = [escape_command(np.full(360, 0.2 + gap), angles, 0.2)[0] for gap in gaps]
+    assert creeps[0] == pytest.approx(0.25)
+    assert creeps[1] == pytest.approx(guard_speed(0.13, FollowerConfig()), abs=1e-3)
+    assert 0.0 < creeps[1] < 0.25 and creeps[2] == 0.0
