@@ -16,6 +16,8 @@ One step per function:
   faster than the robot can stop from within *half* the free lane (less a margin), with
   its deceleration and one control period of reaction. Half, because the return may be a
   teammate driving the other way under the same rule: then each stops within its half.
+  :func:`teammate_clearance` applies it to teammates the peer sensor sees, at any bearing:
+  the speed at which driving closes the gap to one is capped alike.
 
 :class:`PathFollower` is the stateful shell: it follows a path, reports when the goal is
 reached, detects when it makes no progress and then backs up and turns (recovery).
@@ -45,6 +47,7 @@ __all__ = [
     "limit_rates",
     "lookahead_target",
     "pursuit_command",
+    "teammate_clearance",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -330,6 +333,29 @@ def guard_speed(gap: float, config: FollowerConfig) -> float:
     return a * (math.sqrt(dt * dt + 2.0 * room / a) - dt)
 
 
+def teammate_clearance(positions: ArrayLike, robot_radius: float) -> FloatArray:
+    """Gaps to teammates the peer sensor sees, for the braking guard.
+
+    Parameters
+    ----------
+    positions : array_like, shape (K, 2)
+        Teammates' centres in the robot's body frame (x ahead), m (e.g.
+        :func:`mrslam_env.slam.scan.sighted_positions` of the peer observation).
+    robot_radius : float
+        m (both robots' footprints).
+
+    Returns
+    -------
+    ndarray of float64, shape (K, 2)
+        Per teammate: the gap between the footprints (m) and the cosine of its bearing,
+        the share of the robot's speed that closes the gap (> 0 ahead, < 0 behind).
+    """
+    points = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
+    distance = np.hypot(points[:, 0], points[:, 1])
+    cosine = points[:, 0] / np.maximum(distance, 1e-9)
+    return np.column_stack([distance - 2.0 * robot_radius, cosine])
+
+
 def escape_command(
     scan: ArrayLike,
     angles: ArrayLike,
@@ -447,7 +473,11 @@ class PathFollower:
         self.status = "idle"
 
     def step(
-        self, pose: ArrayLike, *, clearance: tuple[float, float] | None = None
+        self,
+        pose: ArrayLike,
+        *,
+        clearance: tuple[float, float] | None = None,
+        teammates: ArrayLike | None = None,
     ) -> NDArray[np.float32]:
         """One normalised action ``(v, omega)`` in [-1, 1] for the current pose.
 
@@ -460,6 +490,11 @@ class PathFollower:
             towards each side is capped by :func:`guard_speed` (the braking guard; it may
             brake harder than ``max_linear_acceleration``, up to the robot's
             ``max_acceleration``). Turning is never limited: the footprint is a disc.
+        teammates : array_like, shape (K, 2), optional
+            :func:`teammate_clearance` of the teammates in sight: the speed at which
+            driving closes the gap to each (speed times the bearing's cosine) is capped
+            by :func:`guard_speed` alike, so that a teammate closing in from the side
+            (outside the lane) is not driven into either.
         """
         config = self.config
         robot = np.asarray(pose, dtype=np.float64)[:3]
@@ -468,6 +503,11 @@ class PathFollower:
         if clearance is not None:
             front, rear = clearance
             v = min(max(v, -guard_speed(rear, config)), guard_speed(front, config))
+        if teammates is not None:
+            for gap, cosine in np.asarray(teammates, dtype=np.float64).reshape(-1, 2):
+                if abs(cosine) > 1e-6:
+                    cap = guard_speed(float(gap), config) / abs(float(cosine))
+                    v = min(v, cap) if cosine > 0 else max(v, -cap)
         self._command = (v, omega)
         # Progress is judged against what the follower wanted: a guard stop is no excuse.
         self._watch_progress(robot, wanted)

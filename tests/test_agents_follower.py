@@ -16,6 +16,7 @@ from agents.follower import (
     limit_rates,
     lookahead_target,
     pursuit_command,
+    teammate_clearance,
 )
 
 DT = 0.1
@@ -323,3 +324,35 @@ def test_escape_turns_to_the_clearest_lane_and_creeps_out() -> None:
     assert creeps[0] == pytest.approx(0.25)
     assert creeps[1] == pytest.approx(guard_speed(0.13, FollowerConfig()), abs=1e-3)
     assert 0.0 < creeps[1] < 0.25 and creeps[2] == 0.0
+
+
+def test_teammate_clearance_gives_the_gap_and_the_share_of_speed_that_closes_it() -> None:
+    gaps = teammate_clearance(np.array([[1.0, 0.0], [0.0, -0.5], [-0.3, 0.4]]), 0.2)
+    np.testing.assert_allclose(gaps[:, 0], [0.6, 0.1, 0.1])
+    np.testing.assert_allclose(gaps[:, 1], [1.0, 0.0, -0.6], atol=1e-12)
+    assert teammate_clearance(np.empty((0, 2)), 0.2).shape == (0, 2)
+
+
+def test_a_teammate_closing_in_from_the_side_caps_the_speed_that_closes_the_gap() -> None:
+    path = np.array([[0.0, 0.0], [6.0, 0.0]])
+    pose = np.array([0.0, 0.0, 0.0])
+    free, watched = PathFollower(), PathFollower()
+    for follower in (free, watched):
+        follower.set_path(path)
+    # A teammate ahead-left at 68 degrees, 0.15 m between the footprints: outside the
+    # lane (the lidar guard does not see it), but driving on closes the gap.
+    beside = 0.55 * np.array([[math.cos(math.radians(68)), math.sin(math.radians(68))]])
+    far = np.array([[5.0, 0.5]])
+    for _ in range(15):
+        unguarded = free.step(pose)
+        assert np.array_equal(watched.step(pose, teammates=teammate_clearance(far, 0.2)), unguarded)
+    near = teammate_clearance(beside, 0.2)
+    slowed = watched.step(pose, teammates=near)
+    cap = guard_speed(0.15, watched.config) / math.cos(math.radians(68))
+    assert slowed[0] * MAX_SPEED == pytest.approx(cap, abs=1e-6)
+    assert slowed[0] < unguarded[0]
+    # Within the margin it stops; a teammate beside (90 degrees) or behind does not.
+    touching = teammate_clearance(0.45 * np.array([[0.6, 0.8]]), 0.2)
+    assert watched.step(pose, teammates=touching)[0] == 0.0
+    side = teammate_clearance(np.array([[0.0, 0.45], [-0.45, 0.0]]), 0.2)
+    assert watched.step(pose, teammates=side)[0] > 0.0
