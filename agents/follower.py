@@ -494,7 +494,9 @@ class PathFollower:
             :func:`teammate_clearance` of the teammates in sight: the speed at which
             driving closes the gap to each (speed times the bearing's cosine) is capped
             by :func:`guard_speed` alike, so that a teammate closing in from the side
-            (outside the lane) is not driven into either.
+            (outside the lane) is not driven into either; one within ``stop_distance``
+            (with ``clearance`` given) is backed away from at up to ``recovery_speed``,
+            as far as the lane on that side allows.
         """
         config = self.config
         robot = np.asarray(pose, dtype=np.float64)[:3]
@@ -505,6 +507,16 @@ class PathFollower:
             v = min(max(v, -guard_speed(rear, config)), guard_speed(front, config))
         if teammates is not None:
             for gap, cosine in np.asarray(teammates, dtype=np.float64).reshape(-1, 2):
+                if gap < config.stop_distance and clearance is not None:
+                    # Inside the margin (touching, or about to): turning in place would
+                    # keep the contact; move away from it along the axis, as far as the
+                    # lane on that side allows.
+                    front, rear = clearance
+                    if cosine >= 0:
+                        v = -min(config.recovery_speed, guard_speed(rear, config))
+                    else:
+                        v = min(config.recovery_speed, guard_speed(front, config))
+                    break
                 if abs(cosine) > 1e-6:
                     cap = guard_speed(float(gap), config) / abs(float(cosine))
                     v = min(v, cap) if cosine > 0 else max(v, -cap)

@@ -356,3 +356,19 @@ def test_a_teammate_closing_in_from_the_side_caps_the_speed_that_closes_the_gap(
     assert watched.step(pose, teammates=touching)[0] == 0.0
     side = teammate_clearance(np.array([[0.0, 0.45], [-0.45, 0.0]]), 0.2)
     assert watched.step(pose, teammates=side)[0] > 0.0
+
+
+def test_a_teammate_within_the_margin_is_backed_away_from_as_the_lane_allows() -> None:
+    follower = PathFollower()
+    follower.set_path(np.array([[0.0, 0.0], [6.0, 0.0]]))
+    pose = np.array([0.0, 0.0, 0.0])
+    open_lane = (np.inf, np.inf)
+    # Touching ahead-left (30 degrees): reverse; touching behind-right: forward.
+    ahead = teammate_clearance(0.42 * np.array([[math.cos(0.5), math.sin(0.5)]]), 0.2)
+    behind = teammate_clearance(np.array([[-0.3, -0.25]]), 0.2)
+    v_ahead = follower.step(pose, clearance=open_lane, teammates=ahead)[0]
+    v_behind = follower.step(pose, clearance=open_lane, teammates=behind)[0]
+    assert v_ahead * MAX_SPEED == pytest.approx(-follower.config.recovery_speed)
+    assert v_behind * MAX_SPEED == pytest.approx(follower.config.recovery_speed)
+    # ... but never into a return on the other side.
+    assert follower.step(pose, clearance=(np.inf, 0.05), teammates=ahead)[0] == 0.0
