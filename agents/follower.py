@@ -11,6 +11,13 @@ One step per function:
 * :func:`limit_rates`: acceleration limits, so the commands change smoothly.
 * :func:`lane_clearance`: free distance ahead of and behind the footprint from a scan, a
   last-resort guard against driving into what the map does not show yet.
+* :func:`guard_speed`: the braking guard on that distance, the one rule that keeps the
+  robot off walls it has not mapped and off a teammate: never drive towards a return
+  faster than the robot can stop from within *half* the free lane (less a margin), with
+  its deceleration and one control period of reaction. Half, because the return may be a
+  teammate driving the other way under the same rule: then each stops within its half.
+  :func:`teammate_clearance` applies it to teammates the peer sensor sees, at any bearing:
+  the speed at which driving closes the gap to one is capped alike.
 
 :class:`PathFollower` is the stateful shell: it follows a path, reports when the goal is
 reached, detects when it makes no progress and then backs up and turns (recovery).
@@ -35,10 +42,12 @@ __all__ = [
     "FollowerStatus",
     "PathFollower",
     "escape_command",
+    "guard_speed",
     "lane_clearance",
     "limit_rates",
     "lookahead_target",
     "pursuit_command",
+    "teammate_clearance",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -57,6 +66,9 @@ class FollowerConfig:
     """Angular speed at action 1, rad/s: the env's ``RobotConfig.max_turn_rate``."""
     dt: float = DEFAULT_ENV.dt
     """Control period, s: the env's ``EnvConfig.dt``."""
+    max_acceleration: float = DEFAULT_ENV.robot.max_acceleration
+    """The robot's largest change of speed, m/s^2: the env's ``RobotConfig.max_acceleration``
+    (the deceleration the braking guard counts on)."""
     cruise_speed: float = 0.8
     """Speed on straight stretches, m/s (<= max_speed)."""
     min_speed: float = 0.08
@@ -75,8 +87,10 @@ class FollowerConfig:
     """Largest change of the commanded speed, m/s^2."""
     max_angular_acceleration: float = 5.0
     """Largest change of the commanded turn rate, rad/s^2."""
-    stop_distance: float = 0.12
-    """Gap to an obstacle (beyond the footprint) at which driving towards it stops, m."""
+    stop_distance: float = 0.1
+    """The braking guard's margin: the gap to a return in the lane (beyond the footprint)
+    at which driving towards it has stopped, m. Farther out the speed towards it is capped
+    by :func:`guard_speed`."""
     stuck_steps: int = 30
     """Steps over which no progress means stuck."""
     stuck_distance: float = 0.08
@@ -98,6 +112,7 @@ class FollowerConfig:
                 "max_speed",
                 "max_turn_rate",
                 "dt",
+                "max_acceleration",
                 "cruise_speed",
                 "min_speed",
                 "lookahead",
@@ -133,10 +148,12 @@ class FollowerConfig:
 
     @staticmethod
     def env_figures(env: EnvConfig) -> EnvFigures:
-        """The fields that are the env's figures: the speeds at action 1, the period."""
+        """The fields that are the env's figures: the speeds at action 1, the robot's
+        acceleration limit, the period."""
         return {
             "max_speed": ("robot.max_speed", env.robot.max_speed),
             "max_turn_rate": ("robot.max_turn_rate", env.robot.max_turn_rate),
+            "max_acceleration": ("robot.max_acceleration", env.robot.max_acceleration),
             "dt": ("dt", env.dt),
         }
 
@@ -296,16 +313,67 @@ def lane_clearance(
     return front, rear
 
 
+def guard_speed(gap: float, config: FollowerConfig) -> float:
+    """The fastest speed (m/s, >= 0) at which the robot may drive towards a return ``gap``
+    (m) beyond its footprint: the speed ``v`` from which it stops within
+    ``(gap - stop_distance) / 2``, reacting one control period late and braking at the
+    robot's ``max_acceleration`` ``a``: ``v dt + v^2 / (2 a) = (gap - stop_distance) / 2``.
+
+    The half is what makes the rule hold between two robots: a return may be a teammate
+    closing in under the same rule, and then each one stops within its half of the gap.
+    Against a wall it costs speed only in the last few decimetres (0.6 m/s at 0.4 m with
+    the default robot).
+    """
+    room = 0.5 * (gap - config.stop_distance)
+    if room <= 0.0:
+        return 0.0
+    if math.isinf(room):
+        return math.inf
+    a, dt = config.max_acceleration, config.dt
+    return a * (math.sqrt(dt * dt + 2.0 * room / a) - dt)
+
+
+def teammate_clearance(positions: ArrayLike, robot_radius: float) -> FloatArray:
+    """Gaps to teammates the peer sensor sees, for the braking guard.
+
+    Parameters
+    ----------
+    positions : array_like, shape (K, 2)
+        Teammates' centres in the robot's body frame (x ahead), m (e.g.
+        :func:`mrslam_env.slam.scan.sighted_positions` of the peer observation).
+    robot_radius : float
+        m (both robots' footprints).
+
+    Returns
+    -------
+    ndarray of float64, shape (K, 2)
+        Per teammate: the gap between the footprints (m) and the cosine of its bearing,
+        the share of the robot's speed that closes the gap (> 0 ahead, < 0 behind).
+    """
+    points = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
+    distance = np.hypot(points[:, 0], points[:, 1])
+    cosine = points[:, 0] / np.maximum(distance, 1e-9)
+    return np.column_stack([distance - 2.0 * robot_radius, cosine])
+
+
 def escape_command(
-    scan: ArrayLike, angles: ArrayLike, robot_radius: float, *, step_deg: float = 10.0
+    scan: ArrayLike,
+    angles: ArrayLike,
+    robot_radius: float,
+    *,
+    step_deg: float = 10.0,
+    config: FollowerConfig | None = None,
 ) -> NDArray[np.float32]:
     """A reactive way out when the planner cannot help (no passable cell near the robot,
     or the scan keeps stopping it where the map shows no wall, e.g. at a desk corner seen
     only edge-on): turn towards the heading whose lane (the strip the footprint sweeps)
-    is clearest, and creep forward once facing it with room ahead.
+    is clearest, and creep forward (at most 0.25 of full speed) once facing it, no faster
+    than the braking guard allows (:func:`guard_speed` with ``config``: the robot's
+    figures; default the default env's).
 
     Returns the normalised ``(v, omega)`` (float32, (2,)).
     """
+    config = config if config is not None else FollowerConfig()
     ranges = np.asarray(scan, dtype=np.float64)
     beam_angles = np.asarray(angles, dtype=np.float64)
     candidates = np.radians(np.arange(-180.0, 180.0, step_deg))
@@ -320,7 +388,9 @@ def escape_command(
     direction = float(candidates[good][np.argmin(np.abs(candidates[good]))])
     front = float(clear[np.argmin(np.abs(candidates))])
     turn = float(np.clip(direction / (math.pi / 4), -1.0, 1.0))
-    forward = 0.25 if abs(direction) <= math.radians(step_deg) and front > 0.15 else 0.0
+    forward = 0.0
+    if abs(direction) <= math.radians(step_deg):
+        forward = min(0.25, guard_speed(front, config) / config.max_speed)
     return np.array([forward, turn], dtype=np.float32)
 
 
@@ -403,7 +473,11 @@ class PathFollower:
         self.status = "idle"
 
     def step(
-        self, pose: ArrayLike, *, clearance: tuple[float, float] | None = None
+        self,
+        pose: ArrayLike,
+        *,
+        clearance: tuple[float, float] | None = None,
+        teammates: ArrayLike | None = None,
     ) -> NDArray[np.float32]:
         """One normalised action ``(v, omega)`` in [-1, 1] for the current pose.
 
@@ -412,20 +486,41 @@ class PathFollower:
         pose : array_like, shape (3,)
             ``(x, y, theta)`` in the path's frame.
         clearance : tuple of float, optional
-            ``(front, rear)`` free distances from :func:`lane_clearance`; motion towards
-            a side closer than ``stop_distance`` is stopped (turning still works).
+            ``(front, rear)`` free distances from :func:`lane_clearance`: the speed
+            towards each side is capped by :func:`guard_speed` (the braking guard; it may
+            brake harder than ``max_linear_acceleration``, up to the robot's
+            ``max_acceleration``). Turning is never limited: the footprint is a disc.
+        teammates : array_like, shape (K, 2), optional
+            :func:`teammate_clearance` of the teammates in sight: the speed at which
+            driving closes the gap to each (speed times the bearing's cosine) is capped
+            by :func:`guard_speed` alike, so that a teammate closing in from the side
+            (outside the lane) is not driven into either; one within ``stop_distance``
+            (with ``clearance`` given) is backed away from at up to ``recovery_speed``,
+            as far as the lane on that side allows.
         """
         config = self.config
         robot = np.asarray(pose, dtype=np.float64)[:3]
         wanted = self._desired(robot)
-        desired = wanted
+        v, omega = limit_rates(self._command, wanted, config)
         if clearance is not None:
             front, rear = clearance
-            if (wanted[0] > 0 and front < config.stop_distance) or (
-                wanted[0] < 0 and rear < config.stop_distance
-            ):
-                desired = (0.0, wanted[1])
-        self._command = limit_rates(self._command, desired, config)
+            v = min(max(v, -guard_speed(rear, config)), guard_speed(front, config))
+        if teammates is not None:
+            for gap, cosine in np.asarray(teammates, dtype=np.float64).reshape(-1, 2):
+                if gap < config.stop_distance and clearance is not None:
+                    # Inside the margin (touching, or about to): turning in place would
+                    # keep the contact; move away from it along the axis, as far as the
+                    # lane on that side allows.
+                    front, rear = clearance
+                    if cosine >= 0:
+                        v = -min(config.recovery_speed, guard_speed(rear, config))
+                    else:
+                        v = min(config.recovery_speed, guard_speed(front, config))
+                    break
+                if abs(cosine) > 1e-6:
+                    cap = guard_speed(float(gap), config) / abs(float(cosine))
+                    v = min(v, cap) if cosine > 0 else max(v, -cap)
+        self._command = (v, omega)
         # Progress is judged against what the follower wanted: a guard stop is no excuse.
         self._watch_progress(robot, wanted)
         action = np.array(

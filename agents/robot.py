@@ -2,8 +2,8 @@
 
 :class:`~mrslam_env.config.EnvConfig` (its ``robot``, ``peer`` and ``dt``) is the truth.
 An agent config that needs one of its figures (the footprint radius, the speeds at action
-1, the control period, the peer sensor's range) holds a copy, and the copy comes from the
-env in one way only:
+1, the acceleration limit, the control period, the peer sensor's range) holds a copy, and
+the copy comes from the env in one way only:
 
 * ``XConfig.for_env(env_config, **overrides)`` builds the config for that env; the
   overrides set tuning knobs, and overriding an env figure is a ``ValueError``;

@@ -11,10 +11,12 @@ import pytest
 from agents.follower import (
     FollowerConfig,
     PathFollower,
+    guard_speed,
     lane_clearance,
     limit_rates,
     lookahead_target,
     pursuit_command,
+    teammate_clearance,
 )
 
 DT = 0.1
@@ -136,6 +138,93 @@ def test_the_clearance_guard_stops_forward_motion_but_allows_turning() -> None:
     assert action[1] > 0.0
 
 
+ANGLES = -np.pi + np.arange(360) * (2 * np.pi / 360)
+
+
+def wall_ahead(distance: float) -> np.ndarray:
+    """A scan (360 beams) of a wall across the heading ``distance`` m from the centre,
+    nothing else within 8 m."""
+    with np.errstate(divide="ignore"):
+        ranges = np.where(np.cos(ANGLES) > 0, distance / np.cos(ANGLES), np.inf)
+    return np.minimum(ranges, 8.0)
+
+
+def test_guard_speed_stops_within_half_the_gap_less_the_margin() -> None:
+    config = FollowerConfig()
+    a, dt, margin = ACCELERATION, DT, config.stop_distance
+    assert (config.max_acceleration, config.dt) == (a, dt)  # the env's robot and period
+    assert guard_speed(margin, config) == 0.0
+    assert guard_speed(0.0, config) == 0.0
+    assert guard_speed(-0.1, config) == 0.0  # touching already: no closer
+    assert guard_speed(np.inf, config) == np.inf
+    speeds = [guard_speed(gap, config) for gap in (0.15, 0.3, 0.6, 1.2)]
+    assert speeds == sorted(speeds) and speeds[0] > 0.0
+    for gap, v in zip((0.15, 0.3, 0.6, 1.2), speeds, strict=True):
+        assert v * dt + v * v / (2 * a) == pytest.approx((gap - margin) / 2)
+    # A robot that brakes harder may drive faster at the same gap.
+    assert guard_speed(0.3, FollowerConfig(max_acceleration=4.0)) > speeds[1]
+
+
+def test_a_return_close_ahead_slows_the_command_and_a_clear_scan_leaves_it() -> None:
+    path = np.array([[0.0, 0.0], [6.0, 0.0]])
+    pose = np.array([0.0, 0.0, 0.0])
+    free, guarded, close = PathFollower(), PathFollower(), PathFollower()
+    for follower in (free, guarded, close):
+        follower.set_path(path)
+    clear = lane_clearance(np.full(360, 8.0), ANGLES, 0.2)
+    near = lane_clearance(wall_ahead(0.6), ANGLES, 0.2)  # a 0.4 m gap
+    for _ in range(15):  # up to cruise speed
+        unguarded = free.step(pose)
+        assert np.array_equal(guarded.step(pose, clearance=clear), unguarded)
+        slowed = close.step(pose, clearance=near)
+    assert unguarded[0] * MAX_SPEED == pytest.approx(free.config.cruise_speed, abs=1e-6)
+    assert slowed[0] * MAX_SPEED == pytest.approx(guard_speed(0.4, close.config), abs=1e-6)
+    assert slowed[0] < 0.8 * unguarded[0]
+    # A return in the margin stops it; backing up is capped by the gap behind alike.
+    assert close.step(pose, clearance=(0.08, np.inf))[0] == 0.0
+
+
+def run_towards(obstacle_x: float, other_path: np.ndarray | None, steps: int = 120) -> float:
+    """Drive robot A east along y = 0 towards a wall at ``obstacle_x`` (or, with
+    ``other_path``, towards robot B following that path westwards under the same rule) in
+    the kinematic model; return the smallest gap between footprints and walls seen."""
+    radius = 0.2
+    robots = [PathFollower()]
+    robots[0].set_path(np.array([[0.0, 0.0], [obstacle_x + 5.0, 0.0]]))
+    poses = [np.array([0.0, 0.0, 0.0])]
+    if other_path is not None:
+        robots.append(PathFollower())
+        robots[1].set_path(other_path)
+        poses.append(np.array([*other_path[0], math.pi]))
+    velocities = [np.zeros(2) for _ in robots]
+    smallest = math.inf
+    for _ in range(steps):
+        actions = []
+        for i, follower in enumerate(robots):
+            # The lidar's view: the wall, or the other robot's disc, along the heading.
+            if other_path is None:
+                gap = obstacle_x - poses[0][0] - radius
+            else:
+                gap = float(np.hypot(*(poses[1][:2] - poses[0][:2]))) - 2 * radius
+            actions.append(follower.step(poses[i], clearance=(gap, np.inf)))
+        for i, action in enumerate(actions):
+            poses[i], velocities[i] = unicycle_step(poses[i], velocities[i], action)
+        if other_path is None:
+            smallest = min(smallest, obstacle_x - poses[0][0] - radius)
+        else:
+            smallest = min(smallest, float(np.hypot(*(poses[1][:2] - poses[0][:2]))) - 2 * radius)
+    return smallest
+
+
+def test_the_guard_keeps_a_robot_off_an_unmapped_wall_and_two_robots_apart() -> None:
+    # A wall 3 m ahead that the path runs through (the map does not show it).
+    gap = run_towards(3.0, None)
+    assert 0.0 < gap <= PathFollower().config.stop_distance + 1e-9
+    # Head-on in a corridor: both drive through where the other one is, at cruise speed.
+    gap = run_towards(0.0, np.array([[4.0, 0.0], [-5.0, 0.0]]))
+    assert gap > 0.0
+
+
 def test_lookahead_target_moves_forward_along_the_path() -> None:
     path = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]])
     target, progress = lookahead_target(path, [0.5, 0.1], 0.0, 0.5)
@@ -228,3 +317,58 @@ def test_escape_turns_to_the_clearest_lane_and_creeps_out() -> None:
     open_ahead = np.where(x < -0.5, 0.3, 8.0)
     v, omega = escape_command(open_ahead, angles, 0.2)
     assert v > 0.0 and abs(omega) < 0.3
+    # In a pocket (every lane as short) it creeps out as the braking guard allows: slower
+    # the tighter, not at all with the return within the margin.
+    gaps = (0.3, 0.13, 0.09)  # beyond the footprint
+    creeps = [escape_command(np.full(360, 0.2 + gap), angles, 0.2)[0] for gap in gaps]
+    assert creeps[0] == pytest.approx(0.25)
+    assert creeps[1] == pytest.approx(guard_speed(0.13, FollowerConfig()), abs=1e-3)
+    assert 0.0 < creeps[1] < 0.25 and creeps[2] == 0.0
+
+
+def test_teammate_clearance_gives_the_gap_and_the_share_of_speed_that_closes_it() -> None:
+    gaps = teammate_clearance(np.array([[1.0, 0.0], [0.0, -0.5], [-0.3, 0.4]]), 0.2)
+    np.testing.assert_allclose(gaps[:, 0], [0.6, 0.1, 0.1])
+    np.testing.assert_allclose(gaps[:, 1], [1.0, 0.0, -0.6], atol=1e-12)
+    assert teammate_clearance(np.empty((0, 2)), 0.2).shape == (0, 2)
+
+
+def test_a_teammate_closing_in_from_the_side_caps_the_speed_that_closes_the_gap() -> None:
+    path = np.array([[0.0, 0.0], [6.0, 0.0]])
+    pose = np.array([0.0, 0.0, 0.0])
+    free, watched = PathFollower(), PathFollower()
+    for follower in (free, watched):
+        follower.set_path(path)
+    # A teammate ahead-left at 68 degrees, 0.15 m between the footprints: outside the
+    # lane (the lidar guard does not see it), but driving on closes the gap.
+    beside = 0.55 * np.array([[math.cos(math.radians(68)), math.sin(math.radians(68))]])
+    far = np.array([[5.0, 0.5]])
+    for _ in range(15):
+        unguarded = free.step(pose)
+        assert np.array_equal(watched.step(pose, teammates=teammate_clearance(far, 0.2)), unguarded)
+    near = teammate_clearance(beside, 0.2)
+    slowed = watched.step(pose, teammates=near)
+    cap = guard_speed(0.15, watched.config) / math.cos(math.radians(68))
+    assert slowed[0] * MAX_SPEED == pytest.approx(cap, abs=1e-6)
+    assert slowed[0] < unguarded[0]
+    # Within the margin it stops; a teammate beside (90 degrees) or behind does not.
+    touching = teammate_clearance(0.45 * np.array([[0.6, 0.8]]), 0.2)
+    assert watched.step(pose, teammates=touching)[0] == 0.0
+    side = teammate_clearance(np.array([[0.0, 0.45], [-0.45, 0.0]]), 0.2)
+    assert watched.step(pose, teammates=side)[0] > 0.0
+
+
+def test_a_teammate_within_the_margin_is_backed_away_from_as_the_lane_allows() -> None:
+    follower = PathFollower()
+    follower.set_path(np.array([[0.0, 0.0], [6.0, 0.0]]))
+    pose = np.array([0.0, 0.0, 0.0])
+    open_lane = (np.inf, np.inf)
+    # Touching ahead-left (30 degrees): reverse; touching behind-right: forward.
+    ahead = teammate_clearance(0.42 * np.array([[math.cos(0.5), math.sin(0.5)]]), 0.2)
+    behind = teammate_clearance(np.array([[-0.3, -0.25]]), 0.2)
+    v_ahead = follower.step(pose, clearance=open_lane, teammates=ahead)[0]
+    v_behind = follower.step(pose, clearance=open_lane, teammates=behind)[0]
+    assert v_ahead * MAX_SPEED == pytest.approx(-follower.config.recovery_speed)
+    assert v_behind * MAX_SPEED == pytest.approx(follower.config.recovery_speed)
+    # ... but never into a return on the other side.
+    assert follower.step(pose, clearance=(np.inf, 0.05), teammates=ahead)[0] == 0.0

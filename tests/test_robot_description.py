@@ -22,7 +22,7 @@ from agents.wander import WanderConfig, WanderPolicy
 from mrslam_env.config import EnvConfig, LidarConfig, PeerSensorConfig, RobotConfig
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
 
-ROBOT = RobotConfig(radius=0.3, max_speed=1.5, max_turn_rate=3.0)
+ROBOT = RobotConfig(radius=0.3, max_speed=1.5, max_turn_rate=3.0, max_acceleration=3.0)
 ENV = EnvConfig(
     robot=ROBOT,
     peer=PeerSensorConfig(detect_range=8.0),
@@ -67,6 +67,7 @@ def test_every_config_built_for_an_env_carries_its_figures() -> None:
     assert planner.blocked_radius == pytest.approx(0.4)
     follower = FollowerConfig.for_env(ENV)
     assert (follower.max_speed, follower.max_turn_rate, follower.dt) == (1.5, 3.0, 0.05)
+    assert follower.max_acceleration == 3.0
     assert WanderConfig.for_env(ENV).robot_radius == 0.3
     explorer = ExplorerConfig.for_env(ENV, separation=3.0)
     assert explorer.planner == PlannerConfig.for_env(ENV)
@@ -83,6 +84,7 @@ def test_every_config_built_for_an_env_carries_its_figures() -> None:
         (lambda: PlannerConfig.for_env(ENV, robot_radius=0.2), "robot_radius"),
         (lambda: FollowerConfig.for_env(ENV, max_speed=1.0), "max_speed"),
         (lambda: FollowerConfig.for_env(ENV, dt=0.1), "dt"),
+        (lambda: FollowerConfig.for_env(ENV, max_acceleration=2.0), "max_acceleration"),
         (lambda: WanderConfig.for_env(ENV, robot_radius=0.2), "robot_radius"),
         (lambda: TeamConfig.for_env(ENV, peer_range=5.0), "peer_range"),
     ],
