@@ -32,6 +32,7 @@ from mrslam_env.merge.decide import (
     rule_has_candidates,
     rule_small_overlap_fits_tightly,
     rule_unambiguous,
+    unsettled_rival,
 )
 from mrslam_env.merge.dissimilarity import Agreement
 from mrslam_env.merge.pipeline import MergeConfig, ScoredHypothesis
@@ -307,6 +308,22 @@ def test_a_contradicted_rival_is_ambiguous_only_from_its_higher_ratio(
     rival = _candidate(6.0, math.pi, score=score, conflicts=9, length=0.5)
     why = rule_unambiguous(_candidates(best, rival), CONFIG)
     assert (why is not None) is refused
+
+
+def test_the_cheap_pass_leaves_an_uncontradicted_rival_to_the_whole_pipeline() -> None:
+    """:func:`unsettled_rival` (the cascade): a different candidate from a quarter of the
+    best score, confident or not, unsettles the cheap pass unless it is contradicted."""
+    best = _candidate(0.0, score=100.0, conflicts=2)
+    narrow = _candidate(6.0, score=25.0, confident=False, conflicts=8, length=1.0)
+    assert unsettled_rival([best, narrow], PIVOT, CONFIG) is narrow
+    low = replace(narrow, score=24.0)  # below the ambiguity ratio
+    assert unsettled_rival([best, low], PIVOT, CONFIG) is None
+    duplicate = replace(narrow, map1_from_map2=np.array([0.3, 0.0, 0.0]))  # the same answer
+    assert unsettled_rival([best, duplicate], PIVOT, CONFIG) is None
+    wall_on_floor = replace(narrow, agreement=_agreement(conflicts=9))  # 9 >= 3 x (2 + 1)
+    assert unsettled_rival([best, wall_on_floor], PIVOT, CONFIG) is None
+    scattered = replace(wall_on_floor, conflict_length=0.29)  # no long group: not contradicted
+    assert unsettled_rival([best, scattered], PIVOT, CONFIG) is scattered
 
 
 # -- rule_covers_enough ------------------------------------------------------------------------

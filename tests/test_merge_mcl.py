@@ -199,3 +199,37 @@ def test_numba_wrap_and_cluster_window_match_numpy_bit_for_bit():
             np.abs(wrap_angle(particles[:, 2] - centre[2])) <= 0.3
         )
         assert np.array_equal(_within(particles, centre, 0.5, 0.3), expected)
+
+
+def test_numba_motion_update_and_cluster_seeds_match_numpy_bit_for_bit():
+    """The motion update is ``compose(particles, odometry + noise)`` bit for bit, and the
+    cluster seed (bin ranks, heaviest remaining bin) is ``np.unique`` / ``np.bincount`` /
+    ``np.argmax``'s, so the filter gives the same particles and clusters as numpy would."""
+    from mrslam_env.geometry import compose
+    from mrslam_env.merge.mcl import _heaviest_bin_members, _ranks, predict_particles
+
+    rng = np.random.default_rng(4)
+    config = MclConfig()
+    particles = np.column_stack(
+        [rng.uniform(-30, 30, 3000), rng.uniform(-30, 30, 3000), rng.uniform(-np.pi, np.pi, 3000)]
+    )
+    for odometry in (np.array([0.25, 0.01, 0.05]), np.array([0.0, 0.0, -3.1])):
+        moved = predict_particles(particles, odometry, config, np.random.default_rng(9))
+        draws = np.random.default_rng(9)
+        distance = float(np.hypot(odometry[0], odometry[1]))
+        noisy = np.empty((len(particles), 3))
+        xy_std = config.motion_xy_noise + config.motion_xy_noise_per_m * distance
+        theta_std = config.motion_theta_noise + config.motion_theta_noise_per_rad * abs(odometry[2])
+        noisy[:, :2] = odometry[:2] + xy_std * draws.normal(size=(len(particles), 2))
+        noisy[:, 2] = odometry[2] + theta_std * draws.normal(size=len(particles))
+        expected = compose(particles, noisy)
+        assert np.array_equal(moved.view(np.int64), expected.view(np.int64))
+    key = rng.integers(0, 500, 4000) * 7
+    assert np.array_equal(_ranks(key, 3500), np.unique(key, return_inverse=True)[1])
+    weights = np.where(rng.random(4000) < 0.5, 0.25, rng.random(4000))  # ties between bins
+    bins = _ranks(key, 3500)
+    for _ in range(3):
+        remaining = rng.random(4000) < 0.7
+        heaviest = np.argmax(np.bincount(bins[remaining], weights=weights[remaining]))
+        expected = remaining & (bins == heaviest)
+        assert np.array_equal(_heaviest_bin_members(bins, weights, remaining), expected)

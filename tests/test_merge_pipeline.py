@@ -191,7 +191,10 @@ def test_result_reports_ranked_hypotheses_and_timings(overlapping: MergedPair) -
         assert hypothesis.proposed_by in ("virtual robot", "correlation", "hough", "symmetry")
         assert hypothesis.map1_from_map2.shape == (3,)
     assert result.agreement is not None and result.agreement.index >= 0.9
-    assert {"prepare", "hypotheses", "judge", "fuse", "total"} <= set(result.seconds)
+    stages = set(result.seconds)
+    assert {"prepare", "fuse", "total"} <= stages
+    # The virtual robot's stages, or the cascade's cheap pass alone (MergeConfig.cascade).
+    assert {"hypotheses", "judge"} <= stages or "cascade.judge" in stages
     assert all(v >= 0.0 for v in result.seconds.values())
     report = result.as_dict()
     assert report["transform"] == dict(
@@ -272,6 +275,45 @@ def test_no_overlap_is_no_confident_merge(
     assert report["transform"] is None and report["reason"] == result.reason
     # Refusing still reports what was tried.
     assert len(report["hypotheses"]) == len(result.hypotheses)
+
+
+def _same_result(a: MergeResult, b: MergeResult) -> bool:
+    same_transform = (a.transform is None and b.transform is None) or (
+        a.transform is not None
+        and b.transform is not None
+        and np.array_equal(a.transform, b.transform)
+    )
+    return (
+        same_transform
+        and a.reason == b.reason
+        and [h.as_dict() for h in a.hypotheses] == [h.as_dict() for h in b.hypotheses]
+    )
+
+
+@pytest.mark.parametrize("case", ["office", "maze-far", "office-vs-warehouse"])
+def test_the_cascade_answers_from_the_cheap_pass_or_exactly_as_without_it(case: str) -> None:
+    """``MergeConfig.cascade``: the wall-correlation and Hough placements are judged first;
+    when they settle the merge the virtual robot does not run, otherwise the answer is the
+    whole pipeline's, bit for bit."""
+    if case in OVERLAPPING:
+        scenario, centre1, centre2, truth = OVERLAPPING[case]
+        m1, m2 = map_pair(scenario, centre1, centre2, np.array(truth))
+    else:
+        m1, m2 = NOT_OVERLAPPING[case]()
+    whole = merge_maps(m1, m2, MergeConfig(cascade=False), rng=SEED)
+    cascade = merge_maps(m1, m2, MergeConfig(cascade=True), rng=SEED)
+    assert "cascade" in cascade.seconds
+    if "hypotheses" in cascade.seconds:  # the cheap pass did not settle it
+        assert _same_result(cascade, whole)
+    else:
+        assert cascade.chosen is not None and cascade.chosen.proposed_by != "virtual robot"
+        assert all(h.proposed_by != "virtual robot" for h in cascade.hypotheses)
+    if case in OVERLAPPING:
+        translation, rotation = errors(cascade, np.array(truth), m2)
+        assert translation <= MERGE_TOLERANCE_M and rotation <= ONE_DEGREE
+        assert "hypotheses" not in cascade.seconds  # a clean overlap: settled cheaply
+    else:
+        assert cascade.transform is None and _same_result(cascade, whole)
 
 
 # -- 3. bad input, resolutions, large maps, determinism, configuration ----------------------

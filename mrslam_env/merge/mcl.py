@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from mrslam_env.geometry import compose, wrap_angle
+from mrslam_env.geometry import wrap_angle
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
 from mrslam_env.merge.skeleton import SkeletonConfig, SkeletonGraph, free_space_graph
 from mrslam_env.merge.virtual import VirtualRun
@@ -338,7 +338,10 @@ def sample_near_skeleton(
     prepared: LocalizationMap, count: int, config: MclConfig, rng: np.random.Generator
 ) -> FloatArray:
     """Particles (count, 3) in FREE cells within ``skeleton_radius`` of the skeleton of m2
-    (the paper's sample-space limitation), headings along the skeleton or uniform."""
+    (the paper's sample-space limitation), headings along the skeleton or uniform.
+
+    The random draws are made here, in a fixed order; :func:`_place_samples` (numba) turns
+    them into particles with the same float operations as numpy would."""
     grid = prepared.grid
     out = np.empty((0, 3))
     attempts = 0
@@ -346,24 +349,31 @@ def sample_near_skeleton(
         attempts += 1
         n = 2 * (count - len(out)) + 16
         pick = rng.integers(0, len(prepared.sample_cells), size=n)
-        centres = grid.cell_to_world(prepared.sample_cells[pick])
-        radius = config.skeleton_radius * np.sqrt(rng.random(n))
+        unit_radius = rng.random(n)
         angle = rng.uniform(-np.pi, np.pi, n)
-        points = centres + np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
-        cells = grid.world_to_cell(points)
-        inside = grid.contains(cells)
-        ok = np.zeros(n, dtype=bool)
-        ok[inside] = prepared.free[cells[inside, 0], cells[inside, 1]]
+        align_draw = rng.random(n)
         skeleton_heading = prepared.sample_headings[pick]
-        aligned = (rng.random(n) < config.aligned_heading_fraction) & np.isfinite(skeleton_heading)
+        aligned = (align_draw < config.aligned_heading_fraction) & np.isfinite(skeleton_heading)
         heading = rng.uniform(-np.pi, np.pi, n)
-        flip = np.where(rng.random(n) < 0.5, 0.0, np.pi)
-        heading[aligned] = (
-            skeleton_heading[aligned]
-            + flip[aligned]
-            + config.aligned_heading_std * rng.normal(size=int(aligned.sum()))
+        flip_draw = rng.random(n)
+        noise = rng.normal(size=int(aligned.sum()))
+        fresh = _place_samples(
+            prepared.sample_cells,
+            pick,
+            unit_radius,
+            angle,
+            aligned,
+            skeleton_heading,
+            heading,
+            flip_draw,
+            noise,
+            prepared.free,
+            float(grid.origin[0]),
+            float(grid.origin[1]),
+            float(grid.resolution),
+            float(config.skeleton_radius),
+            float(config.aligned_heading_std),
         )
-        fresh = np.column_stack([points, _wrap_angles(heading)])[ok]
         out = np.vstack([out, fresh])
     if len(out) < count:  # the skeleton is all but enclosed by non-free cells
         free_cells = np.argwhere(prepared.free)
@@ -372,6 +382,55 @@ def sample_near_skeleton(
         fill = np.column_stack([points, rng.uniform(-np.pi, np.pi, len(pick))])
         out = np.vstack([out, fill])
     return out[:count]
+
+
+@numba.njit(cache=True)
+def _place_samples(
+    sample_cells: NDArray[np.int64],
+    pick: NDArray[np.int64],
+    unit_radius: FloatArray,
+    angle: FloatArray,
+    aligned: NDArray[np.bool_],
+    skeleton_heading: FloatArray,
+    heading: FloatArray,
+    flip_draw: FloatArray,
+    noise: FloatArray,
+    free: NDArray[np.bool_],
+    origin_x: float,
+    origin_y: float,
+    resolution: float,
+    skeleton_radius: float,
+    heading_std: float,
+) -> FloatArray:
+    """The particles of one round of :func:`sample_near_skeleton` that land in FREE cells:
+    a point at ``skeleton_radius * sqrt(unit_radius)`` and ``angle`` from the centre of
+    the picked skeleton cell; the aligned ones (in order, one ``noise`` each) head along
+    the skeleton, turned by pi where ``flip_draw >= 0.5``, the others ``heading``."""
+    rows, cols = free.shape
+    n = pick.shape[0]
+    kept = np.empty((n, 3))
+    count = 0
+    next_noise = 0
+    for i in range(n):
+        cell = pick[i]
+        centre_x = origin_x + (sample_cells[cell, 1] + 0.5) * resolution
+        centre_y = origin_y + (sample_cells[cell, 0] + 0.5) * resolution
+        radius = skeleton_radius * math.sqrt(unit_radius[i])
+        x = centre_x + radius * math.cos(angle[i])
+        y = centre_y + radius * math.sin(angle[i])
+        theta = heading[i]
+        if aligned[i]:
+            flip = 0.0 if flip_draw[i] < 0.5 else math.pi
+            theta = skeleton_heading[i] + flip + heading_std * noise[next_noise]
+            next_noise += 1
+        ix = math.floor((x - origin_x) / resolution)
+        iy = math.floor((y - origin_y) / resolution)
+        if 0 <= iy < rows and 0 <= ix < cols and free[iy, ix]:
+            kept[count, 0] = x
+            kept[count, 1] = y
+            kept[count, 2] = _wrap(theta)
+            count += 1
+    return kept[:count].copy()
 
 
 def scan_endpoints(run: VirtualRun, index: int, beams_per_scan: int) -> FloatArray:
@@ -477,10 +536,39 @@ def predict_particles(
     distance = float(np.hypot(odometry[0], odometry[1]))
     xy_std = config.motion_xy_noise + config.motion_xy_noise_per_m * distance
     theta_std = config.motion_theta_noise + config.motion_theta_noise_per_rad * abs(odometry[2])
-    noisy = np.empty((n, 3))
-    noisy[:, :2] = odometry[:2] + xy_std * rng.normal(size=(n, 2))
-    noisy[:, 2] = odometry[2] + theta_std * rng.normal(size=n)
-    return compose(particles, noisy)
+    xy_noise = rng.normal(size=(n, 2))
+    theta_noise = rng.normal(size=n)
+    return _move_particles(
+        np.ascontiguousarray(particles, dtype=np.float64),
+        np.asarray(odometry, dtype=np.float64),
+        xy_std,
+        theta_std,
+        xy_noise,
+        theta_noise,
+    )
+
+
+@numba.njit(cache=True)
+def _move_particles(
+    particles: FloatArray,
+    odometry: FloatArray,
+    xy_std: float,
+    theta_std: float,
+    xy_noise: FloatArray,
+    theta_noise: FloatArray,
+) -> FloatArray:
+    """``compose(particles, odometry + noise)`` with the float operations of
+    :func:`~mrslam_env.geometry.compose`, bit for bit."""
+    out = np.empty((particles.shape[0], 3))
+    for i in range(particles.shape[0]):
+        bx = odometry[0] + xy_std * xy_noise[i, 0]
+        by = odometry[1] + xy_std * xy_noise[i, 1]
+        bt = odometry[2] + theta_std * theta_noise[i]
+        c, s = math.cos(particles[i, 2]), math.sin(particles[i, 2])
+        out[i, 0] = particles[i, 0] + c * bx - s * by
+        out[i, 1] = particles[i, 1] + s * bx + c * by
+        out[i, 2] = _wrap(particles[i, 2] + bt)
+    return out
 
 
 def low_variance_resample(
@@ -532,18 +620,17 @@ def particle_clusters(
     bins -= bins.min(axis=0)
     span = bins.max(axis=0) + 1
     key = (bins[:, 0] * span[1] + bins[:, 1]) * span[2] + bins[:, 2]
-    _, bin_index = np.unique(key, return_inverse=True)
+    bin_index = _ranks(key, int(span[0] * span[1] * span[2]))
     clusters: list[ParticleCluster] = []
     while len(clusters) < max_clusters:
         left = float(weights[remaining].sum())
         if left <= 0 or left < min_weight:
             break
-        bin_weight = np.bincount(bin_index[remaining], weights=weights[remaining])
-        seed_members = remaining & (bin_index == int(np.argmax(bin_weight)))
+        seed_members = _heaviest_bin_members(bin_index, weights, remaining)
         centre = _weighted_mean_pose(particles[seed_members], weights[seed_members])
         members = seed_members
         for _ in range(3):
-            near = remaining & _within(particles, centre, radius, angle)
+            near = _within(particles, centre, radius, angle, remaining)
             if not near.any():
                 break
             members = near
@@ -592,29 +679,92 @@ def _within_kernel(
     centre_theta: float,
     radius_squared: float,
     angle: float,
+    among: NDArray[np.bool_],
 ) -> NDArray[np.bool_]:
     out = np.empty(particles.shape[0], dtype=np.bool_)
     for i in range(particles.shape[0]):
         dx = particles[i, 0] - centre_x
         dy = particles[i, 1] - centre_y
-        out[i] = (dx * dx + dy * dy <= radius_squared) and (
-            abs(_wrap(particles[i, 2] - centre_theta)) <= angle
+        out[i] = (
+            among[i]
+            and (dx * dx + dy * dy <= radius_squared)
+            and (abs(_wrap(particles[i, 2] - centre_theta)) <= angle)
         )
     return out
 
 
 def _within(
-    particles: FloatArray, centre: FloatArray, radius: float, angle: float
+    particles: FloatArray,
+    centre: FloatArray,
+    radius: float,
+    angle: float,
+    among: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.bool_]:
-    """Particles within ``radius`` (x, y) and ``angle`` (heading) of ``centre``."""
+    """Particles within ``radius`` (x, y) and ``angle`` (heading) of ``centre`` (only
+    those of ``among``, when given)."""
+    particles = np.ascontiguousarray(particles, dtype=np.float64)
     return _within_kernel(
-        np.ascontiguousarray(particles, dtype=np.float64),
+        particles,
         float(centre[0]),
         float(centre[1]),
         float(centre[2]),
         radius * radius,
         angle,
+        np.ones(len(particles), dtype=np.bool_) if among is None else among,
     )
+
+
+_DENSE_KEYS = 4_000_000
+"""Above this many possible bin keys, :func:`_ranks` sorts instead of counting."""
+
+
+def _ranks(key: NDArray[np.int64], key_count: int) -> NDArray[np.int64]:
+    """``np.unique(key, return_inverse=True)[1]`` for keys in ``[0, key_count)``: each
+    key's rank among the distinct keys (by counting when the key range is small)."""
+    if key_count > _DENSE_KEYS:
+        return np.unique(key, return_inverse=True)[1].astype(np.int64)
+    return _dense_ranks(key, key_count)
+
+
+@numba.njit(cache=True)
+def _dense_ranks(key: NDArray[np.int64], key_count: int) -> NDArray[np.int64]:
+    rank = np.zeros(key_count, dtype=np.int64)
+    for i in range(key.shape[0]):
+        rank[key[i]] = 1
+    distinct = 0
+    for k in range(key_count):
+        if rank[k]:
+            rank[k] = distinct
+            distinct += 1
+    out = np.empty(key.shape[0], dtype=np.int64)
+    for i in range(key.shape[0]):
+        out[i] = rank[key[i]]
+    return out
+
+
+@numba.njit(cache=True)
+def _heaviest_bin_members(
+    bin_index: NDArray[np.int64], weights: FloatArray, remaining: NDArray[np.bool_]
+) -> NDArray[np.bool_]:
+    """The remaining particles of the bin whose remaining weight is the largest (the
+    first such bin on a tie): ``np.bincount`` then ``np.argmax``, summed in the same
+    order."""
+    bins = 0
+    for i in range(bin_index.shape[0]):
+        if remaining[i] and bin_index[i] + 1 > bins:
+            bins = bin_index[i] + 1
+    total = np.zeros(bins)
+    for i in range(bin_index.shape[0]):
+        if remaining[i]:
+            total[bin_index[i]] += weights[i]
+    best = 0
+    for b in range(bins):
+        if total[b] > total[best]:
+            best = b
+    out = np.empty(bin_index.shape[0], dtype=np.bool_)
+    for i in range(bin_index.shape[0]):
+        out[i] = remaining[i] and bin_index[i] == best
+    return out
 
 
 def _weighted_mean_pose(particles: FloatArray, weights: FloatArray) -> FloatArray:

@@ -419,6 +419,141 @@ def _neighbour_count(mask: BoolArray) -> IntArray:
     return np.where(mask, counts, 0)
 
 
+@numba.njit(cache=True)
+def _grow(buffer: IntArray, needed: int) -> IntArray:
+    """``buffer`` (1-D) with room for at least ``needed`` entries (doubling)."""
+    if needed <= buffer.shape[0]:
+        return buffer
+    grown = np.empty(max(needed, 2 * buffer.shape[0]), dtype=buffer.dtype)
+    grown[: buffer.shape[0]] = buffer
+    return grown
+
+
+@numba.njit(cache=True)
+def _grow_rows(buffer: IntArray, needed: int) -> IntArray:
+    """``buffer`` (N, 2) with room for at least ``needed`` rows (doubling)."""
+    if needed <= buffer.shape[0]:
+        return buffer
+    grown = np.empty((max(needed, 2 * buffer.shape[0]), 2), dtype=buffer.dtype)
+    grown[: buffer.shape[0]] = buffer
+    return grown
+
+
+@numba.njit(cache=True)
+def _trace_edges(
+    thin: BoolArray, node_of: IntArray, node_count: int
+) -> tuple[IntArray, IntArray, IntArray, IntArray, IntArray]:
+    """The branches of :func:`skeleton_graph`: from every node pixel (row-major order)
+    each ring neighbour (:data:`_RING` order) is either another node (a direct edge, once
+    per pixel pair) or, when not yet visited, the start of a branch traced to the next
+    node; then closed loops without nodes, each opened at its first pixel (row-major),
+    which becomes a new node (``node_count`` onward; ``node_of`` is updated).
+
+    Returns the edges' start and end nodes, the offsets of their cells in ``cells`` (the
+    k-th edge is ``cells[offsets[k]:offsets[k + 1]]``) and the loop nodes' pixels.
+    """
+    rows, cols = thin.shape
+    visited = np.zeros(thin.shape, dtype=np.bool_)
+    cells = np.empty((1024, 2), dtype=np.int64)
+    starts = np.empty(64, dtype=np.int64)
+    ends = np.empty(64, dtype=np.int64)
+    offsets = np.zeros(65, dtype=np.int64)
+    n_edges = 0
+    n_cells = 0
+    seen = set()
+    seen.add(np.int64(-1))
+    span = np.int64(rows) * np.int64(cols)
+    ring = np.array(
+        [[1, 0], [1, 1], [0, 1], [-1, 1], [-1, 0], [-1, -1], [0, -1], [1, -1]], dtype=np.int64
+    )
+    loops = np.empty((0, 2), dtype=np.int64)
+    n_loops = 0
+    for phase in range(2):
+        if phase == 0:
+            order = np.argwhere(node_of >= 0)
+        else:
+            order = np.argwhere(thin & ~visited & (node_of < 0))
+            loops = np.empty((order.shape[0], 2), dtype=np.int64)
+        for index in range(order.shape[0]):
+            r0, c0 = order[index, 0], order[index, 1]
+            firsts = np.empty((8, 2), dtype=np.int64)
+            n_first = 0
+            if phase == 1:
+                if visited[r0, c0]:
+                    continue
+                node_of[r0, c0] = node_count + n_loops
+                loops[n_loops, 0] = r0
+                loops[n_loops, 1] = c0
+                n_loops += 1
+                visited[r0, c0] = True
+            for k in range(8):
+                rr, cc = r0 + ring[k, 0], c0 + ring[k, 1]
+                if 0 <= rr < rows and 0 <= cc < cols and thin[rr, cc]:
+                    firsts[n_first, 0] = rr
+                    firsts[n_first, 1] = cc
+                    n_first += 1
+            if phase == 1:
+                n_first = min(n_first, 1)  # the loop is traced from its first neighbour
+            for f in range(n_first):
+                rn, cn = firsts[f, 0], firsts[f, 1]
+                direct = phase == 0 and node_of[rn, cn] >= 0
+                if direct:
+                    if node_of[rn, cn] == node_of[r0, c0]:
+                        continue  # inside one junction cluster
+                    a = r0 * cols + c0
+                    b = rn * cols + cn
+                    key = min(a, b) * span + max(a, b)
+                    if key in seen:
+                        continue
+                    seen.add(key)
+                elif phase == 0 and visited[rn, cn]:
+                    continue
+                if n_edges + 1 >= starts.shape[0]:
+                    starts = _grow(starts, 2 * starts.shape[0])
+                    ends = _grow(ends, 2 * ends.shape[0])
+                    offsets = _grow(offsets, 2 * starts.shape[0] + 1)
+                cells = _grow_rows(cells, n_cells + 2)
+                cells[n_cells, 0], cells[n_cells, 1] = r0, c0
+                cells[n_cells + 1, 0], cells[n_cells + 1, 1] = rn, cn
+                n_cells += 2
+                if direct:
+                    end_node = node_of[rn, cn]
+                else:
+                    pr, pc, cr, cc = r0, c0, rn, cn
+                    while node_of[cr, cc] < 0:
+                        visited[cr, cc] = True
+                        found = False
+                        nr, nc = -1, -1
+                        for k in range(8):
+                            rr, c2 = cr + ring[k, 0], cc + ring[k, 1]
+                            if 0 <= rr < rows and 0 <= c2 < cols and thin[rr, c2]:
+                                if rr == pr and c2 == pc:
+                                    continue
+                                nr, nc = rr, c2
+                                found = True
+                                break
+                        if not found:  # cannot happen on an 8-thin skeleton; stop safely
+                            break
+                        pr, pc, cr, cc = cr, cc, nr, nc
+                        cells = _grow_rows(cells, n_cells + 1)
+                        cells[n_cells, 0], cells[n_cells, 1] = cr, cc
+                        n_cells += 1
+                        if cr == r0 and cc == c0:
+                            break
+                    end_node = node_of[cr, cc] if node_of[cr, cc] >= 0 else node_of[r0, c0]
+                starts[n_edges] = node_of[r0, c0]
+                ends[n_edges] = end_node
+                n_edges += 1
+                offsets[n_edges] = n_cells
+    return (
+        starts[:n_edges].copy(),
+        ends[:n_edges].copy(),
+        offsets[: n_edges + 1].copy(),
+        cells[:n_cells].copy(),
+        loops[:n_loops].copy(),
+    )
+
+
 def skeleton_graph(skeleton: BoolArray) -> SkeletonGraph:
     """Junction/end nodes and the branches between them.
 
@@ -436,7 +571,6 @@ def skeleton_graph(skeleton: BoolArray) -> SkeletonGraph:
         a closed loop without nodes gets a :data:`NODE_LOOP` node.
     """
     thin = thin_to_eight_connected(skeleton)
-    rows, cols = thin.shape
     degree = _neighbour_count(thin)
     node_of = np.full(thin.shape, -1, dtype=np.int64)
     nodes: list[tuple[int, int]] = []
@@ -457,61 +591,14 @@ def skeleton_graph(skeleton: BoolArray) -> SkeletonGraph:
             nodes.append((int(r), int(c)))
             kinds.append(kind)
 
-    def neighbours(r: int, c: int) -> list[tuple[int, int]]:
-        found = []
-        for dr, dc in _RING:
-            rr, cc = r + int(dr), c + int(dc)
-            if 0 <= rr < rows and 0 <= cc < cols and thin[rr, cc]:
-                found.append((rr, cc))
-        return found
-
-    visited = np.zeros(thin.shape, dtype=bool)
-    edges: list[SkeletonEdge] = []
-    seen_direct: set[tuple[tuple[int, int], tuple[int, int]]] = set()
-
-    def trace(start: tuple[int, int], first: tuple[int, int]) -> None:
-        path = [start, first]
-        prev, cur = start, first
-        while node_of[cur] < 0:
-            visited[cur] = True
-            following = [p for p in neighbours(*cur) if p != prev]
-            if not following:  # cannot happen on an 8-thin skeleton; stop safely
-                break
-            nxt = following[0]
-            prev, cur = cur, nxt
-            path.append(cur)
-            if cur == start:
-                break
-        end_node = int(node_of[cur]) if node_of[cur] >= 0 else int(node_of[start])
-        edges.append(SkeletonEdge(int(node_of[start]), end_node, np.array(path, dtype=np.int64)))
-
-    for r, c in np.argwhere(node_of >= 0):
-        start = (int(r), int(c))
-        for nb in neighbours(*start):
-            if node_of[nb] >= 0:
-                if node_of[nb] == node_of[start]:
-                    continue  # inside one junction cluster
-                key = (min(start, nb), max(start, nb))
-                if key in seen_direct:
-                    continue
-                seen_direct.add(key)
-                edges.append(
-                    SkeletonEdge(
-                        int(node_of[start]), int(node_of[nb]), np.array([start, nb], np.int64)
-                    )
-                )
-            elif not visited[nb]:
-                trace(start, nb)
-    # Closed loops with no node at all.
-    for r, c in np.argwhere(thin & ~visited & (node_of < 0)):
-        if visited[r, c]:
-            continue
-        start = (int(r), int(c))
-        node_of[start] = len(nodes)
-        nodes.append(start)
+    starts, ends, offsets, cells, loops = _trace_edges(thin, node_of, len(nodes))
+    for r, c in loops:
+        nodes.append((int(r), int(c)))
         kinds.append(NODE_LOOP)
-        visited[start] = True
-        trace(start, neighbours(*start)[0])
+    edges = [
+        SkeletonEdge(int(starts[k]), int(ends[k]), cells[offsets[k] : offsets[k + 1]].copy())
+        for k in range(len(starts))
+    ]
     return SkeletonGraph(
         skeleton=thin,
         nodes=np.array(nodes, dtype=np.int64).reshape(-1, 2),

@@ -1,11 +1,12 @@
-"""The merge methods the benchmark compares: ours (also without ``crop_to_known``), the random
+"""The merge methods the benchmark compares: ours (also without ``crop_to_known``, or with the
+cascade, ``ours-cascade``), the random
 walk alone, ROS features, Carpin's Hough spectrum."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -87,6 +88,8 @@ class PipelineMethod:
     """
 
     crop_to_known: bool | None = None
+    cascade: bool | None = None
+    """:attr:`~mrslam_env.merge.pipeline.MergeConfig.cascade` (None: the default)."""
 
     def __call__(self, m1: GridMap, m2: GridMap, rng: np.random.Generator) -> FloatArray | None:
         return self.answer(m1, m2, rng)[0]
@@ -98,9 +101,16 @@ class PipelineMethod:
         transform and its proposal before refinement (confident or not)."""
         from mrslam_env.merge.pipeline import MergeConfig, merge_maps
 
-        config = (
-            None if self.crop_to_known is None else MergeConfig(crop_to_known=self.crop_to_known)
-        )
+        config = None
+        if self.crop_to_known is not None or self.cascade is not None:
+            default = MergeConfig()
+            config = replace(
+                default,
+                crop_to_known=default.crop_to_known
+                if self.crop_to_known is None
+                else self.crop_to_known,
+                cascade=default.cascade if self.cascade is None else self.cascade,
+            )
         result = merge_maps(m1, m2, config, rng=rng)
         candidates = [
             np.asarray(transform, dtype=np.float64)
@@ -115,6 +125,8 @@ method_ours = PipelineMethod()
 """The project's pipeline with its default configuration."""
 method_ours_nocrop = PipelineMethod(crop_to_known=False)
 """The pipeline with ``MergeConfig(crop_to_known=False)`` (the default until issue 21)."""
+method_ours_cascade = PipelineMethod(cascade=True)
+"""The pipeline with ``MergeConfig(cascade=True)``: the cheap proposals judged first."""
 
 
 def _random_initial_transform(m1: GridMap, m2: GridMap, rng: np.random.Generator) -> FloatArray:
@@ -214,6 +226,7 @@ def method_hough(m1: GridMap, m2: GridMap, rng: np.random.Generator) -> FloatArr
 _METHODS: dict[str, tuple[MergeMethod, tuple[str, ...]]] = {
     "ours": (method_ours, ("mrslam_env.merge.pipeline",)),
     "ours-nocrop": (method_ours_nocrop, ("mrslam_env.merge.pipeline",)),
+    "ours-cascade": (method_ours_cascade, ("mrslam_env.merge.pipeline",)),
     "random-walk": (
         method_random_walk,
         ("mrslam_env.merge.refine", "mrslam_env.merge.dissimilarity"),
