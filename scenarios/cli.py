@@ -257,8 +257,8 @@ def _build_parser() -> argparse.ArgumentParser:
     merge.add_argument(
         "--methods",
         default="ours,random-walk,features",
-        help="comma-separated methods: ours, ours-nocrop, random-walk, features, hough "
-        "(default: ours,random-walk,features)",
+        help="comma-separated methods: ours, ours-nocrop, ours-cascade, random-walk, features, "
+        "hough (default: ours,random-walk,features)",
     )
     merge.add_argument("--regenerate", action="store_true", help="rebuild the cached pairs")
     merge.add_argument(

@@ -53,6 +53,8 @@ Each is ``(m1, m2, rng) -> map1_from_map2 (3,) or None`` (None = "no confident m
 ``features``     ROS ``multirobot_map_merge`` (:mod:`scenarios.bench.merge.features`; needs the
                  ``baselines`` extra, i.e. OpenCV)
 ``ours-nocrop``  ours with ``MergeConfig(crop_to_known=False)`` (the default until issue 21)
+``ours-cascade`` ours with ``MergeConfig(cascade=True)`` (cheap proposals judged first; off by
+                 default, see docs/decisions.md)
 ``hough``        Carpin's Hough-spectrum merger (:mod:`scenarios.bench.merge.hough`); it
                  answers every pair
 
