@@ -73,6 +73,7 @@ from mrslam_env.config import EnvConfig
 from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import GridMap
 from mrslam_env.merge.fuse import fuse_maps, resample_map, warp_map
+from mrslam_env.merge.graph import GraphEdge, JointRefineConfig, alignment_edge, refine_jointly
 from mrslam_env.merge.pipeline import (
     MergeConfig,
     MergeInputError,
@@ -114,6 +115,9 @@ class TeamConfig:
     out (``correlation_candidates=0``): in a building with repeated parts they add
     confident aliased placements, and live each one costs a rendezvous drive."""
     rendezvous: RendezvousConfig = field(default_factory=RendezvousConfig)
+    joint: JointRefineConfig | None = field(default_factory=JointRefineConfig)
+    """With three robots or more in a group: the joint refinement of their transforms
+    (design §6, teams of N robots); None: the transforms are only chained."""
     peer_range: float = DEFAULT_ENV.peer.detect_range
     """The peer sensor's detection range, m: the env's ``PeerSensorConfig.detect_range``
     (:meth:`for_env`)."""
@@ -427,6 +431,9 @@ class TeamCoordinator:
         self._group_maps: dict[int, tuple[tuple[int, ...], int, GridMap]] = {}
         """Per group root (groups outside the common frame): its members, the step and
         the fusion of their maps in its frame."""
+        self._join_edges: list[GraphEdge] = []
+        """The alignments that joined two groups (nodes: the groups' roots then), each
+        refined on the two groups' maps: edges of the joint refinement."""
         self._maps: MapSource = _no_map
         """The robots' own maps (the last ``maps`` given to :meth:`act`)."""
 
@@ -1015,6 +1022,10 @@ class TeamCoordinator:
         )
         self.rendezvous = None
         self._release_pair()
+        root0, root1 = self._pair_roots()
+        joined = alignment_edge(root0, root1, m0, m1, transform)
+        if joined is not None:
+            self._join_edges.append(joined)
         self._join(transform, rendezvous.hypothesis, verified_at)
         self._last_refine_step = self.step
         self._rest()
@@ -1025,18 +1036,77 @@ class TeamCoordinator:
         ``verified`` before refinement; ``at``: where side 1's robot was, in its root's
         frame), joins side 0's; robots new in the common frame explore the merged map."""
         root0, root1 = self._pair_roots()
-        for k in range(self.n_robots):
-            if self.roots[k] != root1:
-                continue
+        before = [frame.copy() for frame in self.frames]
+        joining = [k for k in range(self.n_robots) if self.roots[k] == root1]
+        for k in joining:
             old = self.frames[k]
             self.frames[k] = compose(transform, old) if k != root1 else transform.copy()
             self.verified[k] = compose(verified, old) if k != root1 else verified.copy()
             self._verified_at[k] = transform_points(inverse(old), at[None, :])[0]
             self.roots[k] = root0
-            if root0 == 0:
+        self._refine_group(root0)
+        self._group_maps.pop(root0, None)
+        self._group_maps.pop(root1, None)
+        for k in range(self.n_robots):
+            if self.roots[k] != 0:
+                continue
+            if k in joining:
                 self.step_joined[k] = self.step
                 # Robot k now explores the merged map, in robot 0's frame.
                 self._change_frame(k, self.frames[k])
+            elif k != 0 and not np.array_equal(self.frames[k], before[k]):
+                self._change_frame(k, compose(self.frames[k], inverse(before[k])))
+
+    def _refine_group(self, root: int) -> None:
+        """With three robots or more in ``root``'s group: every member's transform refined
+        jointly (:func:`~mrslam_env.merge.graph.refine_jointly` on the members' own maps,
+        the root fixed) instead of chained. Kept only when every member stays within the
+        rendezvous tolerances of what was verified for it (:meth:`_within_verified`)."""
+        group = [k for k in range(self.n_robots) if self.roots[k] == root]
+        if len(group) < 3 or self.config.joint is None:
+            return
+        own = [self._maps(k) for k in group]
+        estimate = [self.frames[k] for k in group]
+        node = {k: n for n, k in enumerate(group)}
+        known = [
+            GraphEdge(node[e.i], node[e.j], e.mapi_from_mapj, e.weight, e.pivot, e.information)
+            for e in self._join_edges
+            if e.i in node and e.j in node
+        ]
+        result = refine_jointly(
+            own,
+            estimate,
+            self.config.joint,
+            rng=self.rng,
+            fixed=group.index(root),
+            known_edges=known,
+        )
+        pairs = result.edges[: len(result.edges) - len(known)]
+        names = ", ".join(f"robot_{group[e.i]}-robot_{group[e.j]}" for e in pairs)
+        for k, solved in zip(group, result.transforms, strict=True):
+            verified = self.verified[k]
+            if (
+                k != root
+                and verified is not None
+                and not self._within_verified(solved, verified, self._verified_at[k])
+            ):
+                self._decide(
+                    f"joint refinement ({names}) left what was verified for robot_{k}; "
+                    "kept the chained transforms"
+                )
+                return
+        moved = max(
+            float(np.hypot(*(solved[:2] - self.frames[k][:2])))
+            for k, solved in zip(group, result.transforms, strict=True)
+        )
+        for k, solved in zip(group, result.transforms, strict=True):
+            if k != root:
+                self.frames[k] = solved
+        self._decide(
+            f"transforms of robot_{root}'s group of {len(group)} refined jointly on "
+            f"{len(pairs)} overlapping pairs ({names}) and {len(known)} joins; "
+            f"moved up to {moved:.2f} m"
+        )
 
     def start_coordinated(self, transform: ArrayLike, maps: MapSource) -> None:
         """Skip merging and verification: coordinate from now on with known transforms

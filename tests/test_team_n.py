@@ -11,12 +11,14 @@ from typing import Any
 
 import numpy as np
 import pytest
+from merge_fixtures import poses_near, scan_map
 
 from agents.team import TeamConfig, TeamCoordinator, TeamState, _reachable, _row
 from mrslam_env.config import EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import FREE, GridMap
+from mrslam_env.registry import build_world
 from scenarios.bench.explore import format_explore_table, run_explore_benchmark
 from scenarios.cli import main
 from scenarios.experiment import MapCache, RunConfig
@@ -57,7 +59,7 @@ class _Recorder:
 
 def test_transforms_compose_along_the_graph_and_robots_join_with_their_group() -> None:
     team = TeamCoordinator(
-        TeamConfig(),
+        TeamConfig(joint=None),  # chained only: the joint refinement is tested below
         rng=np.random.default_rng(0),
         n_robots=4,
         policy_factory=lambda e, r: _Recorder(),
@@ -85,6 +87,45 @@ def test_transforms_compose_along_the_graph_and_robots_join_with_their_group() -
     # Each joining robot's policy is told its own frame's place in the common one.
     assert np.allclose(team.policies[1].frames[-1], t01)  # type: ignore[attr-defined]
     assert np.allclose(team.policies[2].frames[-1], t02)  # type: ignore[attr-defined]
+
+
+def test_a_group_of_three_is_refined_jointly_not_chained() -> None:
+    # Three partial maps along the office corridor, each in its own frame (its start).
+    world = build_world("office")
+    rng = np.random.default_rng(3)
+    centres = [(5.0, 4.0), (8.0, 4.0), (11.0, 4.0)]
+    world_from_maps = [np.array([c[0], c[1], 0.3 * k]) for k, c in enumerate(centres)]
+    own = [
+        scan_map(world, poses_near(world, c, 4.0, 12, rng), w)
+        for c, w in zip(centres, world_from_maps, strict=True)
+    ]
+    truth = [compose(inverse(world_from_maps[0]), w) for w in world_from_maps]
+    team = TeamCoordinator(
+        TeamConfig(),
+        rng=np.random.default_rng(0),
+        n_robots=3,
+        policy_factory=lambda e, r: _Recorder(),
+    )
+    team._maps = lambda i: own[i]
+    # Each join a little off (as refined against one map), the errors adding up.
+    off = np.array([0.08, -0.06, np.radians(1.0)])
+    t12 = compose(compose(inverse(truth[1]), truth[2]), off)
+    t01 = compose(truth[1], off)
+    team._set_pair(1, 2)
+    team._join(t12, t12, np.zeros(2))
+    assert np.allclose(team.frames[2], t12)  # a group of two: the one edge as it is
+    team._set_pair(0, 1)
+    team._join(t01, t01, np.zeros(2))
+    decisions = [d.text for d in team.pop_decisions()]
+    assert any("refined jointly on 3 overlapping pairs" in d for d in decisions), decisions
+    for k in (1, 2):
+        chained = compose(t01, t12) if k == 2 else t01
+        error = compose(inverse(truth[k]), team.frames[k])
+        chain_error = compose(inverse(truth[k]), chained)
+        assert np.hypot(*error[:2]) < 0.05 and abs(error[2]) < np.radians(0.5), k
+        assert np.hypot(*error[:2]) < np.hypot(*chain_error[:2])
+        # The policy is told where its frame is in the common one: the refined place.
+        assert np.allclose(team.policies[k].frames[-1], team.frames[k])  # type: ignore[attr-defined]
 
 
 def test_the_common_frame_shares_one_map_and_every_teammate() -> None:
