@@ -1029,7 +1029,11 @@ class TeamCoordinator:
         self._join(transform, rendezvous.hypothesis, verified_at)
         self._last_refine_step = self.step
         self._rest()
-        self._exchange_and_fuse(everyone=False)
+        if len(self.members) > 1:
+            # Only a join into the common frame makes merged views; a view made for
+            # robot 0 alone would be a frozen copy of its map, which its later merges with
+            # other groups would then use instead of its current map.
+            self._exchange_and_fuse(everyone=False)
 
     def _join(self, transform: FloatArray, verified: FloatArray, at: FloatArray) -> None:
         """The pair's groups become one: side 1's group, placed by ``transform`` (refined;

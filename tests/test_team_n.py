@@ -5,6 +5,7 @@ one merged map and their frontiers; ``mrslam run --robots N`` and ``bench explor
 
 from __future__ import annotations
 
+import functools
 import json
 from pathlib import Path
 from typing import Any
@@ -13,7 +14,14 @@ import numpy as np
 import pytest
 from merge_fixtures import poses_near, scan_map
 
-from agents.team import TeamConfig, TeamCoordinator, TeamState, _reachable, _row
+from agents.team import (
+    TeamConfig,
+    TeamCoordinator,
+    TeamState,
+    _reachable,
+    _Rendezvous,
+    _row,
+)
 from mrslam_env.config import EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
 from mrslam_env.geometry import compose, inverse
@@ -89,8 +97,10 @@ def test_transforms_compose_along_the_graph_and_robots_join_with_their_group() -
     assert np.allclose(team.policies[2].frames[-1], t02)  # type: ignore[attr-defined]
 
 
-def test_a_group_of_three_is_refined_jointly_not_chained() -> None:
-    # Three partial maps along the office corridor, each in its own frame (its start).
+@functools.cache
+def _corridor_maps() -> tuple[list[GridMap], list[np.ndarray]]:
+    """Three partial maps along the office corridor, each in its own frame (its start),
+    and the true ``map0_from_map_i``."""
     world = build_world("office")
     rng = np.random.default_rng(3)
     centres = [(5.0, 4.0), (8.0, 4.0), (11.0, 4.0)]
@@ -99,7 +109,34 @@ def test_a_group_of_three_is_refined_jointly_not_chained() -> None:
         scan_map(world, poses_near(world, c, 4.0, 12, rng), w)
         for c, w in zip(centres, world_from_maps, strict=True)
     ]
-    truth = [compose(inverse(world_from_maps[0]), w) for w in world_from_maps]
+    return own, [compose(inverse(world_from_maps[0]), w) for w in world_from_maps]
+
+
+def test_a_join_outside_the_common_frame_leaves_robot_0_its_current_map() -> None:
+    own, truth = _corridor_maps()
+    team = TeamCoordinator(
+        TeamConfig(),
+        rng=np.random.default_rng(0),
+        n_robots=3,
+        policy_factory=lambda e, r: _Recorder(),
+    )
+    current = list(own)
+    team._maps = lambda i: current[i]
+    team._set_pair(1, 2)
+    team._last_poses = [np.zeros(3), np.zeros(3)]
+    t12 = compose(inverse(truth[1]), truth[2])
+    team._accept(_Rendezvous(t12, 0, np.zeros(2), 0), team._side_maps(team._maps), "seen", 0.0)
+    assert team.roots == [0, 1, 1] and team.members == [0]
+    # Robot 0 has no teammate in its frame: no merged view, and its side of its next
+    # merge is its map as it is then, not as it was at the others' join.
+    assert team.merged_map is None and not team.coordinated(0)
+    current[0] = own[1]  # robot 0's map has grown (any other map will do)
+    team.step += team.config.merged_map_every
+    assert team._group_map(0, team._maps) is own[1]
+
+
+def test_a_group_of_three_is_refined_jointly_not_chained() -> None:
+    own, truth = _corridor_maps()
     team = TeamCoordinator(
         TeamConfig(),
         rng=np.random.default_rng(0),
