@@ -854,17 +854,39 @@ class TeamCoordinator:
     def _meeting_point(
         self, hypothesis: FloatArray, maps: MapSource
     ) -> tuple[FloatArray, float] | None:
-        m0, m1 = maps(0), maps(1)
+        """The meeting point (side 0's group frame) and the later arrival's cost, each
+        robot's travel planned on the map it drives on (:meth:`_driven_map`): a robot
+        outside the common frame drives on its own map, which may not know the places
+        its group's map (the merge's) does."""
+        m0 = maps(0)
         planner = self.config.explorer.planner
         costs = []
-        for i, grid in enumerate((m0, m1)):
-            explorer_pose = self._last_poses[i]
+        for side in (0, 1):
+            grid, root_from_grid, pose = self._driven_map(side, maps)
             try:
-                costs.append(distance_field(inflate(grid, planner), explorer_pose).cost)
+                cost = distance_field(inflate(grid, planner), pose).cost
             except ValueError:
                 return None
-        cost1_on_0 = field_on_lattice(costs[1], m1, m0, hypothesis)
-        return choose_meeting_point(costs[0], cost1_on_0, m0)
+            side0_from_grid = root_from_grid if side == 0 else compose(hypothesis, root_from_grid)
+            if side == 0 and grid is m0:
+                costs.append(cost)
+            else:
+                costs.append(field_on_lattice(cost, grid, m0, side0_from_grid))
+        return choose_meeting_point(costs[0], costs[1], m0)
+
+    def _driven_map(self, side: int, maps: MapSource) -> tuple[GridMap, FloatArray, FloatArray]:
+        """The map the pair's side-``side`` robot drives on to a given goal, its place in
+        the robot's group root's frame (``root_from_map``) and the robot's pose in it."""
+        robot = self.pair[side]
+        view = self.views[robot]
+        if self.coordinated(robot) and view is not None:  # the merged map, common frame
+            return view, np.zeros(3), self._last_poses[side]
+        alone = all(self.roots[k] != self.roots[robot] for k in range(self.n_robots) if k != robot)
+        if alone:  # its group's map is its own
+            return maps(side), np.zeros(3), self._last_poses[side]
+        # Outside the common frame a robot explores its own map, even in a group.
+        frame = self.frames[robot] if self.roots[robot] != robot else np.zeros(3)
+        return self._maps(robot), frame, self._poses[robot]
 
     def _verify(self, observations: list[dict[str, Any]], maps: MapSource, link: bool) -> None:
         """One step of the rendezvous; ``observations`` and ``maps`` are the pair's (side
@@ -944,6 +966,13 @@ class TeamCoordinator:
         if rendezvous.in_place:
             if self.step - rendezvous.started >= config.wait_steps:
                 self._set_aside(rendezvous, maps, "lost sight of each other")
+            return
+        stuck = [r for r in robots if self.explorers[r].status == "goal_unreachable"]
+        if stuck:
+            # Not a test of the hypothesis: the robot cannot get there on its map.
+            self._set_aside(
+                rendezvous, maps, f"robot_{stuck[0]} cannot reach the meeting point on its map"
+            )
             return
         arrived = all(self.explorers[r].status in ("arrived", "goal_unreachable") for r in robots)
         if arrived and rendezvous.arrived_at is None:

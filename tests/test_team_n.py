@@ -292,3 +292,26 @@ def test_the_benchmark_reports_each_team_size() -> None:
     table = format_explore_table(rows).splitlines()
     assert table[0].startswith("| scenario | robots | joined | t90 team (s) |")
     assert table[2].startswith("| maze | 2 | 0/1 |") and table[3].startswith("| maze | 3 | 0/2 |")
+
+
+def test_a_robot_that_cannot_reach_the_meeting_point_sets_the_hypothesis_aside() -> None:
+    env = MultiRobotSlamEnv(scenario="office", n_robots=3, seed=0, config=EnvConfig(starts=STARTS))
+    obs, _ = env.reset()
+    agents = env.possible_agents
+    maps = MapCache(env)
+    team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0), n_robots=3)
+    team._retry_area = {pair: np.inf for pair in ((0, 1), (0, 2), (1, 2))}  # injected only
+    team.act([obs[a] for a in agents], maps)
+    team._set_pair(0, 2)
+    team._observe_pair([obs[a] for a in agents])
+    # Far enough apart that the robots must drive to meet.
+    team.hypotheses = [compose(TRUTH[2], [0.0, 0.0, 0.02])]
+    team._start_rendezvous(0, team._side_maps(maps))
+    assert team.state is TeamState.HYPOTHESIS_VERIFICATION and not team.rendezvous.in_place  # type: ignore[union-attr]
+    team.explorers[2].status = "goal_unreachable"  # its map holds no way there
+    team._verify(team._last_observations, team._side_maps(maps), link=False)
+    decisions = [d.text for d in team.pop_decisions()]
+    # Not evidence against the hypothesis: set aside (proposed again later), not rejected.
+    assert any("set aside: robot_2 cannot reach" in d for d in decisions), decisions
+    assert not team.rejected and team.rendezvous is None
+    assert not team._on_goal[0] and not team._on_goal[2]
