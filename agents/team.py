@@ -25,9 +25,11 @@ groups' maps; the states above are then those of that pair (one merge or rendezv
 time, pairs that bring a robot into robot 0's frame first), told as two robots: each
 robot's pose in its root's frame, the partner's peer row. An accepted (refined) transform
 joins the second group to the first, its robots' transforms composed with it: a robot
-joins robot 0's frame when any verified edge reaches its group. The transforms are
-chained along the graph, not refined jointly; each join is refined once, against the
-merged map of the group it joins. Maps are relayed through teammates (the link graph's
+joins robot 0's frame when any verified edge reaches its group. Each join is refined
+against the merged map of the group it joins; once a group holds three robots or more,
+all its transforms are then refined jointly (:func:`mrslam_env.merge.graph.refine_jointly`:
+the overlapping pairs of own maps and the verified joins as edges of one pose graph),
+not only chained. Maps are relayed through teammates (the link graph's
 components). The robots in robot 0's frame explore the merged map and share frontiers;
 the others explore alone. With two robots this is, step for step, the two-robot team.
 
