@@ -25,9 +25,11 @@ groups' maps; the states above are then those of that pair (one merge or rendezv
 time, pairs that bring a robot into robot 0's frame first), told as two robots: each
 robot's pose in its root's frame, the partner's peer row. An accepted (refined) transform
 joins the second group to the first, its robots' transforms composed with it: a robot
-joins robot 0's frame when any verified edge reaches its group. The transforms are
-chained along the graph, not refined jointly; each join is refined once, against the
-merged map of the group it joins. Maps are relayed through teammates (the link graph's
+joins robot 0's frame when any verified edge reaches its group. Each join is refined
+against the merged map of the group it joins; once a group holds three robots or more,
+all its transforms are then refined jointly (:func:`mrslam_env.merge.graph.refine_jointly`:
+the overlapping pairs of own maps and the verified joins as edges of one pose graph),
+not only chained. Maps are relayed through teammates (the link graph's
 components). The robots in robot 0's frame explore the merged map and share frontiers;
 the others explore alone. With two robots this is, step for step, the two-robot team.
 
@@ -73,6 +75,7 @@ from mrslam_env.config import EnvConfig
 from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import GridMap
 from mrslam_env.merge.fuse import fuse_maps, resample_map, warp_map
+from mrslam_env.merge.graph import GraphEdge, JointRefineConfig, alignment_edge, refine_jointly
 from mrslam_env.merge.pipeline import (
     MergeConfig,
     MergeInputError,
@@ -114,6 +117,9 @@ class TeamConfig:
     out (``correlation_candidates=0``): in a building with repeated parts they add
     confident aliased placements, and live each one costs a rendezvous drive."""
     rendezvous: RendezvousConfig = field(default_factory=RendezvousConfig)
+    joint: JointRefineConfig | None = field(default_factory=JointRefineConfig)
+    """With three robots or more in a group: the joint refinement of their transforms
+    (design §6, teams of N robots); None: the transforms are only chained."""
     peer_range: float = DEFAULT_ENV.peer.detect_range
     """The peer sensor's detection range, m: the env's ``PeerSensorConfig.detect_range``
     (:meth:`for_env`)."""
@@ -427,6 +433,9 @@ class TeamCoordinator:
         self._group_maps: dict[int, tuple[tuple[int, ...], int, GridMap]] = {}
         """Per group root (groups outside the common frame): its members, the step and
         the fusion of their maps in its frame."""
+        self._join_edges: list[GraphEdge] = []
+        """The alignments that joined two groups (nodes: the groups' roots then), each
+        refined on the two groups' maps: edges of the joint refinement."""
         self._maps: MapSource = _no_map
         """The robots' own maps (the last ``maps`` given to :meth:`act`)."""
 
@@ -847,17 +856,39 @@ class TeamCoordinator:
     def _meeting_point(
         self, hypothesis: FloatArray, maps: MapSource
     ) -> tuple[FloatArray, float] | None:
-        m0, m1 = maps(0), maps(1)
+        """The meeting point (side 0's group frame) and the later arrival's cost, each
+        robot's travel planned on the map it drives on (:meth:`_driven_map`): a robot
+        outside the common frame drives on its own map, which may not know the places
+        its group's map (the merge's) does."""
+        m0 = maps(0)
         planner = self.config.explorer.planner
         costs = []
-        for i, grid in enumerate((m0, m1)):
-            explorer_pose = self._last_poses[i]
+        for side in (0, 1):
+            grid, root_from_grid, pose = self._driven_map(side, maps)
             try:
-                costs.append(distance_field(inflate(grid, planner), explorer_pose).cost)
+                cost = distance_field(inflate(grid, planner), pose).cost
             except ValueError:
                 return None
-        cost1_on_0 = field_on_lattice(costs[1], m1, m0, hypothesis)
-        return choose_meeting_point(costs[0], cost1_on_0, m0)
+            side0_from_grid = root_from_grid if side == 0 else compose(hypothesis, root_from_grid)
+            if side == 0 and grid is m0:
+                costs.append(cost)
+            else:
+                costs.append(field_on_lattice(cost, grid, m0, side0_from_grid))
+        return choose_meeting_point(costs[0], costs[1], m0)
+
+    def _driven_map(self, side: int, maps: MapSource) -> tuple[GridMap, FloatArray, FloatArray]:
+        """The map the pair's side-``side`` robot drives on to a given goal, its place in
+        the robot's group root's frame (``root_from_map``) and the robot's pose in it."""
+        robot = self.pair[side]
+        view = self.views[robot]
+        if self.coordinated(robot) and view is not None:  # the merged map, common frame
+            return view, np.zeros(3), self._last_poses[side]
+        alone = all(self.roots[k] != self.roots[robot] for k in range(self.n_robots) if k != robot)
+        if alone:  # its group's map is its own
+            return maps(side), np.zeros(3), self._last_poses[side]
+        # Outside the common frame a robot explores its own map, even in a group.
+        frame = self.frames[robot] if self.roots[robot] != robot else np.zeros(3)
+        return self._maps(robot), frame, self._poses[robot]
 
     def _verify(self, observations: list[dict[str, Any]], maps: MapSource, link: bool) -> None:
         """One step of the rendezvous; ``observations`` and ``maps`` are the pair's (side
@@ -938,6 +969,13 @@ class TeamCoordinator:
             if self.step - rendezvous.started >= config.wait_steps:
                 self._set_aside(rendezvous, maps, "lost sight of each other")
             return
+        stuck = [r for r in robots if self.explorers[r].status == "goal_unreachable"]
+        if stuck:
+            # Not a test of the hypothesis: the robot cannot get there on its map.
+            self._set_aside(
+                rendezvous, maps, f"robot_{stuck[0]} cannot reach the meeting point on its map"
+            )
+            return
         arrived = all(self.explorers[r].status in ("arrived", "goal_unreachable") for r in robots)
         if arrived and rendezvous.arrived_at is None:
             rendezvous.arrived_at = self.step
@@ -1015,28 +1053,95 @@ class TeamCoordinator:
         )
         self.rendezvous = None
         self._release_pair()
+        root0, root1 = self._pair_roots()
+        joined = alignment_edge(root0, root1, m0, m1, transform)
+        if joined is not None:
+            self._join_edges.append(joined)
         self._join(transform, rendezvous.hypothesis, verified_at)
         self._last_refine_step = self.step
         self._rest()
-        self._exchange_and_fuse(everyone=False)
+        if len(self.members) > 1:
+            # Only a join into the common frame makes merged views; a view made for
+            # robot 0 alone would be a frozen copy of its map, which its later merges with
+            # other groups would then use instead of its current map.
+            self._exchange_and_fuse(everyone=False)
 
     def _join(self, transform: FloatArray, verified: FloatArray, at: FloatArray) -> None:
         """The pair's groups become one: side 1's group, placed by ``transform`` (refined;
         ``verified`` before refinement; ``at``: where side 1's robot was, in its root's
         frame), joins side 0's; robots new in the common frame explore the merged map."""
         root0, root1 = self._pair_roots()
-        for k in range(self.n_robots):
-            if self.roots[k] != root1:
-                continue
+        before = [frame.copy() for frame in self.frames]
+        joining = [k for k in range(self.n_robots) if self.roots[k] == root1]
+        for k in joining:
             old = self.frames[k]
             self.frames[k] = compose(transform, old) if k != root1 else transform.copy()
             self.verified[k] = compose(verified, old) if k != root1 else verified.copy()
             self._verified_at[k] = transform_points(inverse(old), at[None, :])[0]
             self.roots[k] = root0
-            if root0 == 0:
+        self._refine_group(root0)
+        self._group_maps.pop(root0, None)
+        self._group_maps.pop(root1, None)
+        for k in range(self.n_robots):
+            if self.roots[k] != 0:
+                continue
+            if k in joining:
                 self.step_joined[k] = self.step
                 # Robot k now explores the merged map, in robot 0's frame.
                 self._change_frame(k, self.frames[k])
+            elif k != 0 and not np.array_equal(self.frames[k], before[k]):
+                self._change_frame(k, compose(self.frames[k], inverse(before[k])))
+
+    def _refine_group(self, root: int) -> None:
+        """With three robots or more in ``root``'s group: every member's transform refined
+        jointly (:func:`~mrslam_env.merge.graph.refine_jointly` on the members' own maps,
+        the root fixed) instead of chained. Kept only when every member stays within the
+        rendezvous tolerances of what was verified for it (:meth:`_within_verified`)."""
+        group = [k for k in range(self.n_robots) if self.roots[k] == root]
+        if len(group) < 3 or self.config.joint is None:
+            return
+        own = [self._maps(k) for k in group]
+        estimate = [self.frames[k] for k in group]
+        node = {k: n for n, k in enumerate(group)}
+        known = [
+            GraphEdge(node[e.i], node[e.j], e.mapi_from_mapj, e.weight, e.pivot, e.information)
+            for e in self._join_edges
+            if e.i in node and e.j in node
+        ]
+        result = refine_jointly(
+            own,
+            estimate,
+            self.config.joint,
+            rng=self.rng,
+            fixed=group.index(root),
+            known_edges=known,
+        )
+        pairs = result.edges[: len(result.edges) - len(known)]
+        names = ", ".join(f"robot_{group[e.i]}-robot_{group[e.j]}" for e in pairs)
+        for k, solved in zip(group, result.transforms, strict=True):
+            verified = self.verified[k]
+            if (
+                k != root
+                and verified is not None
+                and not self._within_verified(solved, verified, self._verified_at[k])
+            ):
+                self._decide(
+                    f"joint refinement ({names}) left what was verified for robot_{k}; "
+                    "kept the chained transforms"
+                )
+                return
+        moved = max(
+            float(np.hypot(*(solved[:2] - self.frames[k][:2])))
+            for k, solved in zip(group, result.transforms, strict=True)
+        )
+        for k, solved in zip(group, result.transforms, strict=True):
+            if k != root:
+                self.frames[k] = solved
+        self._decide(
+            f"transforms of robot_{root}'s group of {len(group)} refined jointly on "
+            f"{len(pairs)} overlapping pairs ({names}) and {len(known)} joins; "
+            f"moved up to {moved:.2f} m"
+        )
 
     def start_coordinated(self, transform: ArrayLike, maps: MapSource) -> None:
         """Skip merging and verification: coordinate from now on with known transforms

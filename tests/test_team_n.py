@@ -5,18 +5,28 @@ one merged map and their frontiers; ``mrslam run --robots N`` and ``bench explor
 
 from __future__ import annotations
 
+import functools
 import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from merge_fixtures import poses_near, scan_map
 
-from agents.team import TeamConfig, TeamCoordinator, TeamState, _reachable, _row
+from agents.team import (
+    TeamConfig,
+    TeamCoordinator,
+    TeamState,
+    _reachable,
+    _Rendezvous,
+    _row,
+)
 from mrslam_env.config import EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import FREE, GridMap
+from mrslam_env.registry import build_world
 from scenarios.bench.explore import format_explore_table, run_explore_benchmark
 from scenarios.cli import main
 from scenarios.experiment import MapCache, RunConfig
@@ -57,7 +67,7 @@ class _Recorder:
 
 def test_transforms_compose_along_the_graph_and_robots_join_with_their_group() -> None:
     team = TeamCoordinator(
-        TeamConfig(),
+        TeamConfig(joint=None),  # chained only: the joint refinement is tested below
         rng=np.random.default_rng(0),
         n_robots=4,
         policy_factory=lambda e, r: _Recorder(),
@@ -85,6 +95,74 @@ def test_transforms_compose_along_the_graph_and_robots_join_with_their_group() -
     # Each joining robot's policy is told its own frame's place in the common one.
     assert np.allclose(team.policies[1].frames[-1], t01)  # type: ignore[attr-defined]
     assert np.allclose(team.policies[2].frames[-1], t02)  # type: ignore[attr-defined]
+
+
+@functools.cache
+def _corridor_maps() -> tuple[list[GridMap], list[np.ndarray]]:
+    """Three partial maps along the office corridor, each in its own frame (its start),
+    and the true ``map0_from_map_i``."""
+    world = build_world("office")
+    rng = np.random.default_rng(3)
+    centres = [(5.0, 4.0), (8.0, 4.0), (11.0, 4.0)]
+    world_from_maps = [np.array([c[0], c[1], 0.3 * k]) for k, c in enumerate(centres)]
+    own = [
+        scan_map(world, poses_near(world, c, 4.0, 12, rng), w)
+        for c, w in zip(centres, world_from_maps, strict=True)
+    ]
+    return own, [compose(inverse(world_from_maps[0]), w) for w in world_from_maps]
+
+
+def test_a_join_outside_the_common_frame_leaves_robot_0_its_current_map() -> None:
+    own, truth = _corridor_maps()
+    team = TeamCoordinator(
+        TeamConfig(),
+        rng=np.random.default_rng(0),
+        n_robots=3,
+        policy_factory=lambda e, r: _Recorder(),
+    )
+    current = list(own)
+    team._maps = lambda i: current[i]
+    team._set_pair(1, 2)
+    team._last_poses = [np.zeros(3), np.zeros(3)]
+    t12 = compose(inverse(truth[1]), truth[2])
+    team._accept(_Rendezvous(t12, 0, np.zeros(2), 0), team._side_maps(team._maps), "seen", 0.0)
+    assert team.roots == [0, 1, 1] and team.members == [0]
+    # Robot 0 has no teammate in its frame: no merged view, and its side of its next
+    # merge is its map as it is then, not as it was at the others' join.
+    assert team.merged_map is None and not team.coordinated(0)
+    current[0] = own[1]  # robot 0's map has grown (any other map will do)
+    team.step += team.config.merged_map_every
+    assert team._group_map(0, team._maps) is own[1]
+
+
+def test_a_group_of_three_is_refined_jointly_not_chained() -> None:
+    own, truth = _corridor_maps()
+    team = TeamCoordinator(
+        TeamConfig(),
+        rng=np.random.default_rng(0),
+        n_robots=3,
+        policy_factory=lambda e, r: _Recorder(),
+    )
+    team._maps = lambda i: own[i]
+    # Each join a little off (as refined against one map), the errors adding up.
+    off = np.array([0.08, -0.06, np.radians(1.0)])
+    t12 = compose(compose(inverse(truth[1]), truth[2]), off)
+    t01 = compose(truth[1], off)
+    team._set_pair(1, 2)
+    team._join(t12, t12, np.zeros(2))
+    assert np.allclose(team.frames[2], t12)  # a group of two: the one edge as it is
+    team._set_pair(0, 1)
+    team._join(t01, t01, np.zeros(2))
+    decisions = [d.text for d in team.pop_decisions()]
+    assert any("refined jointly on 3 overlapping pairs" in d for d in decisions), decisions
+    for k in (1, 2):
+        chained = compose(t01, t12) if k == 2 else t01
+        error = compose(inverse(truth[k]), team.frames[k])
+        chain_error = compose(inverse(truth[k]), chained)
+        assert np.hypot(*error[:2]) < 0.05 and abs(error[2]) < np.radians(0.5), k
+        assert np.hypot(*error[:2]) < np.hypot(*chain_error[:2])
+        # The policy is told where its frame is in the common one: the refined place.
+        assert np.allclose(team.policies[k].frames[-1], team.frames[k])  # type: ignore[attr-defined]
 
 
 def test_the_common_frame_shares_one_map_and_every_teammate() -> None:
@@ -214,3 +292,26 @@ def test_the_benchmark_reports_each_team_size() -> None:
     table = format_explore_table(rows).splitlines()
     assert table[0].startswith("| scenario | robots | joined | t90 team (s) |")
     assert table[2].startswith("| maze | 2 | 0/1 |") and table[3].startswith("| maze | 3 | 0/2 |")
+
+
+def test_a_robot_that_cannot_reach_the_meeting_point_sets_the_hypothesis_aside() -> None:
+    env = MultiRobotSlamEnv(scenario="office", n_robots=3, seed=0, config=EnvConfig(starts=STARTS))
+    obs, _ = env.reset()
+    agents = env.possible_agents
+    maps = MapCache(env)
+    team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0), n_robots=3)
+    team._retry_area = {pair: np.inf for pair in ((0, 1), (0, 2), (1, 2))}  # injected only
+    team.act([obs[a] for a in agents], maps)
+    team._set_pair(0, 2)
+    team._observe_pair([obs[a] for a in agents])
+    # Far enough apart that the robots must drive to meet.
+    team.hypotheses = [compose(TRUTH[2], [0.0, 0.0, 0.02])]
+    team._start_rendezvous(0, team._side_maps(maps))
+    assert team.state is TeamState.HYPOTHESIS_VERIFICATION and not team.rendezvous.in_place  # type: ignore[union-attr]
+    team.explorers[2].status = "goal_unreachable"  # its map holds no way there
+    team._verify(team._last_observations, team._side_maps(maps), link=False)
+    decisions = [d.text for d in team.pop_decisions()]
+    # Not evidence against the hypothesis: set aside (proposed again later), not rejected.
+    assert any("set aside: robot_2 cannot reach" in d for d in decisions), decisions
+    assert not team.rejected and team.rendezvous is None
+    assert not team._on_goal[0] and not team._on_goal[2]
