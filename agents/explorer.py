@@ -32,7 +32,13 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from agents.follower import FollowerConfig, PathFollower, escape_command, lane_clearance
+from agents.follower import (
+    FollowerConfig,
+    PathFollower,
+    escape_command,
+    lane_clearance,
+    teammate_clearance,
+)
 from agents.frontiers import FrontierConfig, Frontiers, extract_frontiers
 from agents.planning import (
     CostGrid,
@@ -559,8 +565,11 @@ class ExplorerPolicy:
             assert self._angles is not None
             if self._step + 1 == self._escape_until:
                 self._last_replan_step = -(10**9)
-            return escape_command(scan, self._angles, self.config.planner.robot_radius)
-        action = self.follower.step(pose, clearance=clearance)
+            return escape_command(
+                scan, self._angles, self.config.planner.robot_radius, config=self.config.follower
+            )
+        teammates = teammate_clearance(self._sighted_body, self.config.planner.robot_radius)
+        action = self.follower.step(pose, clearance=clearance, teammates=teammates)
         moved = float(np.hypot(*(pose[:2] - self._still_pose[:2])))
         turned = abs(math.remainder(float(pose[2] - self._still_pose[2]), 2 * math.pi))
         if self.follower.status == "following" and moved < 0.05 and turned < 0.3:
