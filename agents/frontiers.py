@@ -146,14 +146,39 @@ def _padded_unknown(grid: GridMap, min_unknown_area: float) -> BoolArray:
     unknown = np.pad(grid.unknown, 1, constant_values=True)
     min_cells = min_unknown_area / grid.resolution**2
     if min_cells > 1:
-        labels, count = ndimage.label(unknown, structure=np.ones((3, 3), dtype=bool))
-        if count:
-            sizes = np.bincount(labels.ravel(), minlength=count + 1)
-            keep = sizes >= min_cells
-            keep[0] = False
-            keep[labels[0, 0]] = True  # the outside is never a speck
-            unknown = keep[labels]
+        _clear_specks(unknown, min_cells)
     return unknown
+
+
+@numba.njit(cache=True)
+def _clear_specks(unknown: BoolArray, min_cells: float) -> None:
+    """Set False, in place, the 8-connected True components of ``unknown`` with fewer
+    than ``min_cells`` cells, except the one holding cell (0, 0) (the outside ring):
+    ``ndimage.label`` with the 3 x 3 square and a size test per label, by one
+    breadth-first fill per component."""
+    rows, cols = unknown.shape
+    seen = np.zeros((rows, cols), dtype=np.bool_)
+    queue = np.empty(rows * cols, dtype=np.int64)
+    for r0 in range(rows):
+        for c0 in range(cols):
+            if not unknown[r0, c0] or seen[r0, c0]:
+                continue
+            seen[r0, c0] = True
+            queue[0] = r0 * cols + c0
+            head, tail = 0, 1
+            while head < tail:
+                r, c = divmod(queue[head], cols)
+                head += 1
+                for nr in range(max(r - 1, 0), min(r + 2, rows)):
+                    for nc in range(max(c - 1, 0), min(c + 2, cols)):
+                        if unknown[nr, nc] and not seen[nr, nc]:
+                            seen[nr, nc] = True
+                            queue[tail] = nr * cols + nc
+                            tail += 1
+            if tail < min_cells and (r0 > 0 or c0 > 0):  # the outside is never a speck
+                for k in range(tail):
+                    r, c = divmod(queue[k], cols)
+                    unknown[r, c] = False
 
 
 def frontier_cells(
