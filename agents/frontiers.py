@@ -460,7 +460,7 @@ def connected_information_gain(
     half = max(round(sensor_range / grid.resolution), 0)
     box = (2 * half + 1) ** 2
     centres = grid.world_to_cell(points) + 1  # padded coordinates
-    counts, sizes = _touched_in_squares(regions, touches, centres, half)
+    counts, sizes = _touched_in_squares(regions, touches, centres, half, outside)
     for frontier in range(count):
         seen = int(counts[frontier])
         if outside and touches[frontier, outside]:
@@ -471,21 +471,40 @@ def connected_information_gain(
 
 @numba.njit(cache=True)
 def _touched_in_squares(
-    regions: NDArray[np.int32], touches: BoolArray, centres: IntArray, half: int
+    regions: NDArray[np.int32], touches: BoolArray, centres: IntArray, half: int, outside: int
 ) -> tuple[IntArray, IntArray]:
     """Per frontier ``f``, the cells of the square of half-width ``half`` around
     ``centres[f]`` (clipped to ``regions``) whose region ``f`` touches, and the number of
-    cells of the clipped square."""
+    cells of the clipped square. A frontier that touches the region ``outside`` (> 0) and
+    no other (the usual case) counts them from a summed-area table of that region."""
     rows, cols = regions.shape
     count = len(centres)
     counts = np.zeros(count, dtype=np.int64)
     sizes = np.zeros(count, dtype=np.int64)
+    only_outside = np.zeros(count, dtype=np.bool_)
+    if outside > 0:
+        for f in range(count):
+            only = touches[f, outside]
+            for region in range(touches.shape[1]):
+                if only and region != outside and touches[f, region]:
+                    only = False
+            only_outside[f] = only
+    table = np.zeros((rows + 1, cols + 1) if only_outside.any() else (1, 1), dtype=np.int64)
+    if only_outside.any():
+        for r in range(rows):
+            run = 0
+            for c in range(cols):
+                run += regions[r, c] == outside
+                table[r + 1, c + 1] = table[r, c + 1] + run
     for f in range(count):
         r0, r1 = max(centres[f, 0] - half, 0), min(centres[f, 0] + half + 1, rows)
         c0, c1 = max(centres[f, 1] - half, 0), min(centres[f, 1] + half + 1, cols)
         if r0 >= r1 or c0 >= c1:
             continue
         sizes[f] = (r1 - r0) * (c1 - c0)
+        if only_outside[f]:
+            counts[f] = table[r1, c1] - table[r0, c1] - table[r1, c0] + table[r0, c0]
+            continue
         total = 0
         for r in range(r0, r1):
             for c in range(c0, c1):

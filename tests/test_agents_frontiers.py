@@ -12,6 +12,7 @@ from agents.frontiers import (
     _dilated_inside,
     _nearest_feature_at,
     _open_square,
+    _touched_in_squares,
     cluster_frontiers,
     connected_information_gain,
     extract_frontiers,
@@ -110,6 +111,20 @@ def test_speck_removal_matches_labelling_by_the_3x3_square() -> None:
         cleared = unknown.copy()
         _clear_specks(cleared, min_cells)
         assert np.array_equal(cleared, keep[labels])
+
+
+def test_touched_counts_from_the_summed_area_table_match_the_cell_loop() -> None:
+    rng = np.random.default_rng(5)
+    regions = rng.integers(0, 4, (30, 40)).astype(np.int32)
+    touches = np.zeros((12, 4), dtype=bool)
+    touches[:, 2] = True
+    touches[::3, 1] = True  # a third touch another region too: the loop
+    centres = rng.integers(-5, 45, (12, 2))
+    with_table = _touched_in_squares(regions, touches, centres, 6, 2)
+    by_loop = _touched_in_squares(regions, touches, centres, 6, 0)  # no outside: no table
+    assert np.array_equal(with_table[0], by_loop[0])
+    assert np.array_equal(with_table[1], by_loop[1])
+    assert with_table[0].sum() > 0
 
 
 def test_long_frontiers_are_split_into_pieces_no_longer_than_max_size() -> None:
