@@ -146,14 +146,39 @@ def _padded_unknown(grid: GridMap, min_unknown_area: float) -> BoolArray:
     unknown = np.pad(grid.unknown, 1, constant_values=True)
     min_cells = min_unknown_area / grid.resolution**2
     if min_cells > 1:
-        labels, count = ndimage.label(unknown, structure=np.ones((3, 3), dtype=bool))
-        if count:
-            sizes = np.bincount(labels.ravel(), minlength=count + 1)
-            keep = sizes >= min_cells
-            keep[0] = False
-            keep[labels[0, 0]] = True  # the outside is never a speck
-            unknown = keep[labels]
+        _clear_specks(unknown, min_cells)
     return unknown
+
+
+@numba.njit(cache=True)
+def _clear_specks(unknown: BoolArray, min_cells: float) -> None:
+    """Set False, in place, the 8-connected True components of ``unknown`` with fewer
+    than ``min_cells`` cells, except the one holding cell (0, 0) (the outside ring):
+    ``ndimage.label`` with the 3 x 3 square and a size test per label, by one
+    breadth-first fill per component."""
+    rows, cols = unknown.shape
+    seen = np.zeros((rows, cols), dtype=np.bool_)
+    queue = np.empty(rows * cols, dtype=np.int64)
+    for r0 in range(rows):
+        for c0 in range(cols):
+            if not unknown[r0, c0] or seen[r0, c0]:
+                continue
+            seen[r0, c0] = True
+            queue[0] = r0 * cols + c0
+            head, tail = 0, 1
+            while head < tail:
+                r, c = divmod(queue[head], cols)
+                head += 1
+                for nr in range(max(r - 1, 0), min(r + 2, rows)):
+                    for nc in range(max(c - 1, 0), min(c + 2, cols)):
+                        if unknown[nr, nc] and not seen[nr, nc]:
+                            seen[nr, nc] = True
+                            queue[tail] = nr * cols + nc
+                            tail += 1
+            if tail < min_cells and (r0 > 0 or c0 > 0):  # the outside is never a speck
+                for k in range(tail):
+                    r, c = divmod(queue[k], cols)
+                    unknown[r, c] = False
 
 
 def frontier_cells(
@@ -435,7 +460,7 @@ def connected_information_gain(
     half = max(round(sensor_range / grid.resolution), 0)
     box = (2 * half + 1) ** 2
     centres = grid.world_to_cell(points) + 1  # padded coordinates
-    counts, sizes = _touched_in_squares(regions, touches, centres, half)
+    counts, sizes = _touched_in_squares(regions, touches, centres, half, outside)
     for frontier in range(count):
         seen = int(counts[frontier])
         if outside and touches[frontier, outside]:
@@ -446,21 +471,40 @@ def connected_information_gain(
 
 @numba.njit(cache=True)
 def _touched_in_squares(
-    regions: NDArray[np.int32], touches: BoolArray, centres: IntArray, half: int
+    regions: NDArray[np.int32], touches: BoolArray, centres: IntArray, half: int, outside: int
 ) -> tuple[IntArray, IntArray]:
     """Per frontier ``f``, the cells of the square of half-width ``half`` around
     ``centres[f]`` (clipped to ``regions``) whose region ``f`` touches, and the number of
-    cells of the clipped square."""
+    cells of the clipped square. A frontier that touches the region ``outside`` (> 0) and
+    no other (the usual case) counts them from a summed-area table of that region."""
     rows, cols = regions.shape
     count = len(centres)
     counts = np.zeros(count, dtype=np.int64)
     sizes = np.zeros(count, dtype=np.int64)
+    only_outside = np.zeros(count, dtype=np.bool_)
+    if outside > 0:
+        for f in range(count):
+            only = touches[f, outside]
+            for region in range(touches.shape[1]):
+                if only and region != outside and touches[f, region]:
+                    only = False
+            only_outside[f] = only
+    table = np.zeros((rows + 1, cols + 1) if only_outside.any() else (1, 1), dtype=np.int64)
+    if only_outside.any():
+        for r in range(rows):
+            run = 0
+            for c in range(cols):
+                run += regions[r, c] == outside
+                table[r + 1, c + 1] = table[r, c + 1] + run
     for f in range(count):
         r0, r1 = max(centres[f, 0] - half, 0), min(centres[f, 0] + half + 1, rows)
         c0, c1 = max(centres[f, 1] - half, 0), min(centres[f, 1] + half + 1, cols)
         if r0 >= r1 or c0 >= c1:
             continue
         sizes[f] = (r1 - r0) * (c1 - c0)
+        if only_outside[f]:
+            counts[f] = table[r1, c1] - table[r0, c1] - table[r1, c0] + table[r0, c0]
+            continue
         total = 0
         for r in range(r0, r1):
             for c in range(c0, c1):

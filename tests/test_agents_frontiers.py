@@ -8,9 +8,11 @@ from scipy import ndimage
 
 from agents.frontiers import (
     FrontierConfig,
+    _clear_specks,
     _dilated_inside,
     _nearest_feature_at,
     _open_square,
+    _touched_in_squares,
     cluster_frontiers,
     connected_information_gain,
     extract_frontiers,
@@ -94,6 +96,35 @@ def test_unknown_specks_inside_mapped_space_make_no_frontier() -> None:
     grid = GridMap(cells=cells, resolution=RESOLUTION)
     assert not frontier_cells(grid).any()
     assert frontier_cells(grid, FrontierConfig(min_unknown_area=0.0)).sum() == 4
+
+
+def test_speck_removal_matches_labelling_by_the_3x3_square() -> None:
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        unknown = rng.random((rng.integers(3, 50), rng.integers(3, 50))) < 0.45
+        unknown = np.pad(unknown, 1, constant_values=True)
+        min_cells = float(rng.integers(2, 30))
+        labels, count = ndimage.label(unknown, structure=np.ones((3, 3), dtype=bool))
+        keep = np.bincount(labels.ravel(), minlength=count + 1) >= min_cells
+        keep[0] = False
+        keep[labels[0, 0]] = True
+        cleared = unknown.copy()
+        _clear_specks(cleared, min_cells)
+        assert np.array_equal(cleared, keep[labels])
+
+
+def test_touched_counts_from_the_summed_area_table_match_the_cell_loop() -> None:
+    rng = np.random.default_rng(5)
+    regions = rng.integers(0, 4, (30, 40)).astype(np.int32)
+    touches = np.zeros((12, 4), dtype=bool)
+    touches[:, 2] = True
+    touches[::3, 1] = True  # a third touch another region too: the loop
+    centres = rng.integers(-5, 45, (12, 2))
+    with_table = _touched_in_squares(regions, touches, centres, 6, 2)
+    by_loop = _touched_in_squares(regions, touches, centres, 6, 0)  # no outside: no table
+    assert np.array_equal(with_table[0], by_loop[0])
+    assert np.array_equal(with_table[1], by_loop[1])
+    assert with_table[0].sum() > 0
 
 
 def test_long_frontiers_are_split_into_pieces_no_longer_than_max_size() -> None:
