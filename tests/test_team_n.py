@@ -112,14 +112,18 @@ def _corridor_maps() -> tuple[list[GridMap], list[np.ndarray]]:
     return own, [compose(inverse(world_from_maps[0]), w) for w in world_from_maps]
 
 
-def test_a_join_outside_the_common_frame_leaves_robot_0_its_current_map() -> None:
-    own, truth = _corridor_maps()
-    team = TeamCoordinator(
+def _team_of_three() -> TeamCoordinator:
+    return TeamCoordinator(
         TeamConfig(),
         rng=np.random.default_rng(0),
         n_robots=3,
         policy_factory=lambda e, r: _Recorder(),
     )
+
+
+def test_a_join_outside_the_common_frame_leaves_robot_0_its_current_map() -> None:
+    own, truth = _corridor_maps()
+    team = _team_of_three()
     current = list(own)
     team._maps = lambda i: current[i]
     team._set_pair(1, 2)
@@ -137,12 +141,7 @@ def test_a_join_outside_the_common_frame_leaves_robot_0_its_current_map() -> Non
 
 def test_a_group_of_three_is_refined_jointly_not_chained() -> None:
     own, truth = _corridor_maps()
-    team = TeamCoordinator(
-        TeamConfig(),
-        rng=np.random.default_rng(0),
-        n_robots=3,
-        policy_factory=lambda e, r: _Recorder(),
-    )
+    team = _team_of_three()
     team._maps = lambda i: own[i]
     # Each join a little off (as refined against one map), the errors adding up.
     off = np.array([0.08, -0.06, np.radians(1.0)])
@@ -166,12 +165,7 @@ def test_a_group_of_three_is_refined_jointly_not_chained() -> None:
 
 
 def test_the_common_frame_shares_one_map_and_every_teammate() -> None:
-    team = TeamCoordinator(
-        TeamConfig(),
-        rng=np.random.default_rng(0),
-        n_robots=3,
-        policy_factory=lambda e, r: _Recorder(),
-    )
+    team = _team_of_three()
     cells = np.full((60, 100), FREE, dtype=np.int8)
     grid = GridMap(cells=cells, resolution=0.1)
     team.roots, team.frames = [0, 0, 0], [np.zeros(3), np.array([2.0, 0.0, 0.0]), np.zeros(3)]
