@@ -158,17 +158,19 @@ def test_correlation_rejects_maps_of_different_resolutions(
         correlation_hypotheses(m1, resample_map(m2, 0.1))
 
 
+# Two runs and a starved particle filter: the virtual robot proposes nothing right.
+WEAK_VIRTUAL_ROBOT = MergeConfig(
+    virtual=VirtualRobotConfig(max_runs=2),
+    mcl=MclConfig(n_particles=20, initial_particles=40),
+    candidates=1,
+)
+
+
 def test_merge_finds_through_the_correlation_what_a_weak_virtual_robot_misses(
     maze_small_overlap: tuple[GridMap, GridMap],
 ) -> None:
     m1, m2 = maze_small_overlap
-    # Two runs and a starved particle filter: the virtual robot proposes nothing right.
-    weak = MergeConfig(
-        virtual=VirtualRobotConfig(max_runs=2),
-        mcl=MclConfig(n_particles=20, initial_particles=40),
-        candidates=1,
-    )
-    result = merge_maps(m1, m2, weak, rng=0)
+    result = merge_maps(m1, m2, WEAK_VIRTUAL_ROBOT, rng=0)
     assert result.chosen is not None, result.reason
     assert result.chosen.proposed_by == "correlation"
     assert result.chosen.votes == 0
@@ -177,7 +179,7 @@ def test_merge_finds_through_the_correlation_what_a_weak_virtual_robot_misses(
     assert moved < 0.1 and turned < math.radians(1.0)
     assert result.as_dict()["hypotheses"][0]["proposed_by"] == "correlation"
     # Without the correlation (its Hough rotations included).
-    without = merge_maps(m1, m2, replace(weak, correlation_candidates=0), rng=0)
+    without = merge_maps(m1, m2, replace(WEAK_VIRTUAL_ROBOT, correlation_candidates=0), rng=0)
     assert without.transform is None
 
 
@@ -202,22 +204,17 @@ def test_merge_finds_through_the_hough_source_what_the_others_miss(
     # A starved virtual robot, and wall orientations that point the correlation 45° off:
     # only the Hough rotations lead to the truth, and the same decision step accepts it.
     monkeypatch.setattr(hypotheses, "relative_rotations", lambda *args: [TRUTH[2] + math.pi / 4])
-    weak = MergeConfig(
-        virtual=VirtualRobotConfig(max_runs=2),
-        mcl=MclConfig(n_particles=20, initial_particles=40),
-        candidates=1,
-    )
-    result = merge_maps(m1, m2, weak, rng=0)
+    result = merge_maps(m1, m2, WEAK_VIRTUAL_ROBOT, rng=0)
     assert result.chosen is not None, result.reason
     assert result.chosen.proposed_by == "hough" and result.chosen.votes == 0
     assert result.transform is not None
     moved, turned = relative_transform_error(result.transform, TRUTH, known_centroid(m2))
     assert moved < 0.1 and turned < math.radians(1.0)
     assert "hypotheses.hough" in result.seconds
-    without = merge_maps(m1, m2, replace(weak, hough_candidates=0), rng=0)
+    without = merge_maps(m1, m2, replace(WEAK_VIRTUAL_ROBOT, hough_candidates=0), rng=0)
     assert without.transform is None
     # The live team's setting, the correlation off, turns the Hough placements off too.
-    off = merge_maps(m1, m2, replace(weak, correlation_candidates=0), rng=0)
+    off = merge_maps(m1, m2, replace(WEAK_VIRTUAL_ROBOT, correlation_candidates=0), rng=0)
     assert off.transform is None and "hypotheses.hough" not in off.seconds
 
 

@@ -206,14 +206,21 @@ def _settle(team: TeamCoordinator, env: MultiRobotSlamEnv, maps: MapCache, obs: 
     return obs
 
 
-def test_any_pair_is_verified_by_rendezvous_and_three_robots_end_in_one_frame() -> None:
+def _office_team_of_three() -> tuple[MultiRobotSlamEnv, dict, MapCache, TeamCoordinator]:
+    """Three robots at ``STARTS`` in the office, a coordinator that retries merges at any
+    map size (injected) and has seen the links and the poses once."""
     env = MultiRobotSlamEnv(scenario="office", n_robots=3, seed=0, config=EnvConfig(starts=STARTS))
     obs, _ = env.reset()
-    agents = env.possible_agents
     maps = MapCache(env)
     team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0), n_robots=3)
-    team._retry_area = {pair: np.inf for pair in ((0, 1), (0, 2), (1, 2))}  # injected only
-    team.act([obs[a] for a in agents], maps)  # sees the links and the poses
+    team._retry_area = {pair: np.inf for pair in ((0, 1), (0, 2), (1, 2))}
+    team.act([obs[a] for a in env.possible_agents], maps)
+    return env, obs, maps, team
+
+
+def test_any_pair_is_verified_by_rendezvous_and_three_robots_end_in_one_frame() -> None:
+    env, obs, maps, team = _office_team_of_three()
+    agents = env.possible_agents
 
     def put(a: int, b: int, hypothesis: np.ndarray) -> None:
         team._set_pair(a, b)
@@ -289,13 +296,8 @@ def test_the_benchmark_reports_each_team_size() -> None:
 
 
 def test_a_robot_that_cannot_reach_the_meeting_point_sets_the_hypothesis_aside() -> None:
-    env = MultiRobotSlamEnv(scenario="office", n_robots=3, seed=0, config=EnvConfig(starts=STARTS))
-    obs, _ = env.reset()
+    env, obs, maps, team = _office_team_of_three()
     agents = env.possible_agents
-    maps = MapCache(env)
-    team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0), n_robots=3)
-    team._retry_area = {pair: np.inf for pair in ((0, 1), (0, 2), (1, 2))}  # injected only
-    team.act([obs[a] for a in agents], maps)
     team._set_pair(0, 2)
     team._observe_pair([obs[a] for a in agents])
     # Far enough apart that the robots must drive to meet.
