@@ -178,7 +178,16 @@ def test_scan_endpoints_skip_invalid_and_no_return_beams(office_map):
 def test_numba_wrap_and_cluster_window_match_numpy_bit_for_bit():
     """The kernels behind the particle sampling and clustering wrap angles exactly as
     :func:`~mrslam_env.geometry.wrap_angle` does, so the filter draws the same particles."""
-    from mrslam_env.merge.mcl import _within, _wrap_angles
+    import numba
+
+    from mrslam_env.merge.mcl import _within, _wrap
+
+    @numba.njit
+    def _wrap_angles(angles: np.ndarray) -> np.ndarray:
+        out = np.empty(angles.shape[0])
+        for i in range(angles.shape[0]):
+            out[i] = _wrap(angles[i])
+        return out
 
     rng = np.random.default_rng(3)
     angles = np.concatenate(

@@ -663,15 +663,6 @@ def _wrap(angle: float) -> float:
 
 
 @numba.njit(cache=True)
-def _wrap_angles(angles: FloatArray) -> FloatArray:
-    """:func:`~mrslam_env.geometry.wrap_angle` of a 1-D array, bit for bit."""
-    out = np.empty(angles.shape[0])
-    for i in range(angles.shape[0]):
-        out[i] = _wrap(angles[i])
-    return out
-
-
-@numba.njit(cache=True)
 def _within_kernel(
     particles: FloatArray,
     centre_x: float,

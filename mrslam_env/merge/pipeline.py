@@ -453,8 +453,6 @@ class MergeResult:
 
 
 def _check_input(grid: GridMap, name: str, config: MergeConfig) -> None:
-    if not isinstance(grid, GridMap):
-        raise MergeInputError(f"{name} must be a GridMap, got {type(grid).__name__}")
     if grid.cells.size == 0:
         raise MergeInputError(f"{name} is empty (0 cells)")
     known = np.count_nonzero(~grid.unknown)

@@ -249,14 +249,13 @@ def bench_rl(
     *,
     n_steps: int = 1000,
     repeats: int = 3,
-    vector: bool = True,
 ) -> tuple[list[RLBenchRow], TeammateTiming]:
     """Agent-steps/s of the RL configurations on one scenario (two robots, 360 beams).
 
     Rows: the parallel env with the ``Dict`` or the flat observation, onboard SLAM off or
     on (an agent-step is one robot's action: env steps/s x 2); the single-robot env with
-    one idle and with one frontier teammate (SLAM on; the learner's steps); if ``vector``,
-    two single-robot envs with frontier teammates in a Gymnasium ``AsyncVectorEnv`` of two
+    one idle and with one frontier teammate (SLAM on; the learner's steps); two
+    single-robot envs with frontier teammates in a Gymnasium ``AsyncVectorEnv`` of two
     processes (learner steps summed). Plus the frontier teammate's own time per step.
     """
     from mrslam_env.registry import build_world
@@ -276,9 +275,6 @@ def bench_rl(
             scenario, teammates=teammates, n_steps=n_steps, repeats=repeats
         )
         rows.append(RLBenchRow(f"single-robot env, 1 {teammates} teammate, SLAM on", rate, rate))
-    if vector:
-        rate = vector_steps_per_second(scenario, n_steps=max(n_steps // 2, 1), repeats=repeats)
-        rows.append(
-            RLBenchRow("AsyncVectorEnv, 2 processes x single-robot env (frontier)", rate, rate)
-        )
+    rate = vector_steps_per_second(scenario, n_steps=max(n_steps // 2, 1), repeats=repeats)
+    rows.append(RLBenchRow("AsyncVectorEnv, 2 processes x single-robot env (frontier)", rate, rate))
     return rows, teammate_timing(scenario, n_steps=n_steps, repeats=repeats)
