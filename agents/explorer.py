@@ -848,7 +848,7 @@ class ExplorerPolicy:
                 cost_weight=config.cost_weight,
                 min_cost=config.follower.goal_tolerance,
             )
-            choice = self._choose_frontier(frontiers, distances)
+            choice = self._choose_frontier(frontiers, distances, (gains, excluded, current))
         if choice < 0:
             self._empty_replans += 1
             self._target = None
@@ -889,17 +889,21 @@ class ExplorerPolicy:
             excluded |= _separation_discount(frontiers.goals, points, config.blacklist_radius) < 1.0
         return gains, excluded, self._current_frontier(frontiers)
 
-    def _choose_frontier(self, frontiers: Frontiers, distances: DistanceField) -> int:
+    def _choose_frontier(
+        self,
+        frontiers: Frontiers,
+        distances: DistanceField,
+        parts: tuple[FloatArray, NDArray[np.bool_], int],
+    ) -> int:
         """Index of the frontier of highest utility, or -1 when none is worth it.
 
         ``distances`` needs exact path costs only at the goals that could be the best
-        (:func:`~agents.planning.best_goal_field`); elsewhere upper bounds do."""
+        (:func:`~agents.planning.best_goal_field`); elsewhere upper bounds do. ``parts``
+        are :meth:`_utility_parts` of ``frontiers``, as the search's bound used them."""
         config = self.config
-        if len(frontiers) == 0:
-            return -1
         rows, cols = frontiers.goal_cells.T
         path_costs = distances.cost[rows, cols]
-        gains, excluded, current = self._utility_parts(frontiers)
+        gains, excluded, current = parts
         utility = frontier_utility(gains, path_costs, config.cost_weight, min_gain=config.min_gain)
         utility[excluded] = -np.inf
         # A goal next to the robot reveals nothing new: its frontier is what the robot

@@ -503,19 +503,21 @@ class PathFollower:
         wanted = self._desired(robot)
         v, omega = limit_rates(self._command, wanted, config)
         if clearance is not None:
-            front, rear = clearance
-            v = min(max(v, -guard_speed(rear, config)), guard_speed(front, config))
+            back_cap, ahead_cap = (
+                guard_speed(clearance[1], config),
+                guard_speed(clearance[0], config),
+            )
+            v = min(max(v, -back_cap), ahead_cap)
         if teammates is not None:
             for gap, cosine in np.asarray(teammates, dtype=np.float64).reshape(-1, 2):
                 if gap < config.stop_distance and clearance is not None:
                     # Inside the margin (touching, or about to): turning in place would
                     # keep the contact; move away from it along the axis, as far as the
                     # lane on that side allows.
-                    front, rear = clearance
                     if cosine >= 0:
-                        v = -min(config.recovery_speed, guard_speed(rear, config))
+                        v = -min(config.recovery_speed, back_cap)
                     else:
-                        v = min(config.recovery_speed, guard_speed(front, config))
+                        v = min(config.recovery_speed, ahead_cap)
                     break
                 if abs(cosine) > 1e-6:
                     cap = guard_speed(float(gap), config) / abs(float(cosine))

@@ -583,18 +583,6 @@ def _goal_cells(
     return goal_cells, valid
 
 
-def _work_window(grid: GridMap, reachable: BoolArray, margin: int) -> tuple[slice, slice]:
-    """The rows and columns of the bounding box of the known and reachable cells, grown by
-    ``margin`` cells and clipped to the grid (the whole grid when nothing is known).
-
-    Everything outside is UNKNOWN and unreachable, which the frontier steps treat exactly
-    as the space beyond the grid's edge, so they give the same frontiers on this window
-    (with ``margin >= 2``: the one-cell UNKNOWN ring that keeps the outside connected, and
-    the erosion's neighbourhood) for a fraction of the work on a grown SLAM grid.
-    """
-    return known_window(grid, margin, also=reachable)
-
-
 def extract_frontiers(
     grid: GridMap,
     config: FrontierConfig | None = None,
@@ -621,13 +609,18 @@ def extract_frontiers(
     reach = grid.free if reachable is None else np.asarray(reachable, dtype=bool)
     if reach.shape != grid.shape:
         raise ValueError(f"reachable has shape {reach.shape}, the map {grid.shape}")
-    # The work runs on the known part of the map; positions come back in the map's cells.
-    rows, cols = _work_window(grid, reach, max(config.min_free_width, 2))
+    # The work runs on the known part of the map (the bounding box of the known and
+    # reachable cells, grown by a margin): everything outside is UNKNOWN and unreachable,
+    # which the frontier steps treat exactly as the space beyond the grid's edge, so they
+    # give the same frontiers (with a margin >= 2: the one-cell UNKNOWN ring that keeps the
+    # outside connected, and the erosion's neighbourhood). Positions come back in the
+    # map's cells; the window's cells are a slice of a checked map.
+    rows, cols = known_window(grid, max(config.min_free_width, 2), also=reach)
     offset = (rows.start, cols.start)
-    window = GridMap(
-        cells=grid.cells[rows, cols],
-        resolution=grid.resolution,
-        origin=(
+    window = GridMap.trusted(
+        grid.cells[rows, cols],
+        grid.resolution,
+        (
             grid.origin[0] + cols.start * grid.resolution,
             grid.origin[1] + rows.start * grid.resolution,
         ),

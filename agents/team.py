@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from typing import Any
 
@@ -1104,7 +1104,7 @@ class TeamCoordinator:
         estimate = [self.frames[k] for k in group]
         node = {k: n for n, k in enumerate(group)}
         known = [
-            GraphEdge(node[e.i], node[e.j], e.mapi_from_mapj, e.weight, e.pivot, e.information)
+            replace(e, i=node[e.i], j=node[e.j])
             for e in self._join_edges
             if e.i in node and e.j in node
         ]
