@@ -74,7 +74,7 @@ from agents.robot import DEFAULT_ENV, EnvFigures, build_for_env, check_against_e
 from mrslam_env.config import EnvConfig
 from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import GridMap
-from mrslam_env.merge.fuse import fuse_maps, resample_map, warp_map
+from mrslam_env.merge.fuse import fuse_all, fuse_maps, resample_map, warp_map
 from mrslam_env.merge.graph import GraphEdge, JointRefineConfig, alignment_edge, refine_jointly
 from mrslam_env.merge.pipeline import (
     MergeConfig,
@@ -638,12 +638,7 @@ class TeamCoordinator:
         fresh = made is not None and self.step - made[1] < self.config.merged_map_every
         if made is not None and fresh and made[0] == tuple(group):
             return made[2]
-        grid = maps(root)
-        for k in group:
-            other = maps(k)
-            if not math.isclose(other.resolution, grid.resolution):
-                other = resample_map(other, grid.resolution)
-            grid = fuse_maps(grid, other, self.frames[k])
+        grid = fuse_all(maps(root), ((maps(k), self.frames[k]) for k in group))
         self._group_maps[root] = (tuple(group), self.step, grid)
         return grid
 

@@ -61,7 +61,7 @@ from mrslam_env.evaluation import (
 from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import GridMap
 from mrslam_env.mapio import load_map, save_map
-from mrslam_env.merge.fuse import fuse_maps, resample_map
+from mrslam_env.merge.fuse import fuse_all
 from mrslam_env.recording import Recorder
 from mrslam_env.registry import build_world
 from mrslam_env.sim.mapworld import world_from_map
@@ -648,14 +648,11 @@ def _record_step(
 
 def _fuse_all(own_maps: list[GridMap], transforms: dict[int, FloatArray | None]) -> GridMap:
     """Robot 0's map with robot k's fused in by ``transforms[k]`` (``map0_from_map_k``)."""
-    merged = own_maps[0]
+    others = []
     for k, transform in transforms.items():
         assert transform is not None
-        other = own_maps[k]
-        if not math.isclose(other.resolution, merged.resolution):
-            other = resample_map(other, merged.resolution)
-        merged = fuse_maps(merged, other, transform)
-    return merged
+        others.append((own_maps[k], transform))
+    return fuse_all(own_maps[0], others)
 
 
 def _robot_merge(team: TeamCoordinator, robot: int, truth: FloatArray) -> dict[str, Any]:

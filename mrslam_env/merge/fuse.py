@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -23,7 +24,7 @@ from mrslam_env.geometry import transform_points
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap, resample_cells
 from mrslam_env.merge.dissimilarity import check_same_resolution, check_transform
 
-__all__ = ["covering_grid", "fuse_cells", "fuse_maps", "resample_map", "warp_map"]
+__all__ = ["covering_grid", "fuse_all", "fuse_cells", "fuse_maps", "resample_map", "warp_map"]
 
 LATTICE_EPS = 1e-6
 """Tolerance, in cells, when snapping world bounds to a lattice (absorbs round-off so a
@@ -264,3 +265,15 @@ def fuse_maps(m1: GridMap, m2: GridMap, map1_from_map2: ArrayLike) -> GridMap:
         resolution=canvas.resolution,
         origin=canvas.origin,
     )
+
+
+def fuse_all(base: GridMap, others: Iterable[tuple[GridMap, ArrayLike]]) -> GridMap:
+    """``base`` with every other map fused into its frame, in order (:func:`fuse_maps`):
+    each ``(map, base_from_map)``, a map of another resolution resampled to the fused
+    map's first (:func:`resample_map`)."""
+    fused = base
+    for other, transform in others:
+        if not math.isclose(other.resolution, fused.resolution):
+            other = resample_map(other, fused.resolution)
+        fused = fuse_maps(fused, other, transform)
+    return fused

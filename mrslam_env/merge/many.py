@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from mrslam_env.geometry import compose, inverse, transform_points, wrap_scalar
 from mrslam_env.gridmap import GridMap, crop_to_known
-from mrslam_env.merge.fuse import fuse_maps, resample_map
+from mrslam_env.merge.fuse import fuse_all
 from mrslam_env.merge.pipeline import KNOWN_MARGIN, MergeConfig, MergeResult, merge_maps
 from mrslam_env.validation import check_fields
 
@@ -158,11 +158,9 @@ def merge_many(
     # As in merge_maps: with crop_to_known, the known parts are fused (unknown padding
     # neither widens the fused map nor costs memory).
     parts = [crop_to_known(m, KNOWN_MARGIN) if config.merge.crop_to_known else m for m in maps]
-    fused = parts[0]
-    for k in range(1, n):
-        transform = transforms[k]
-        if transform is not None:
-            fused = fuse_maps(fused, resample_map(parts[k], fused.resolution), transform)
+    fused = fuse_all(
+        parts[0], ((parts[k], t) for k, t in enumerate(transforms) if k and t is not None)
+    )
     return MultiMergeResult(
         transforms=transforms, pairs=pairs, tree=tree, inconsistent=inconsistent, fused=fused
     )
