@@ -363,22 +363,35 @@ def pairwise_edges(
             turned = abs(wrap_scalar(float(refined[2] - guess[2])))
             if float(np.hypot(*moved[0])) > config.max_shift or turned > config.max_turn:
                 continue
-            walls = wall_information(grids[i], grids[j], refined, pivot)
-            if not np.any(walls):
-                continue
-            # Each shared wall cell pins its normal to about a cell.
-            information = walls / resolution**2
-            edges.append(
-                GraphEdge(
-                    i=i,
-                    j=j,
-                    mapi_from_mapj=refined,
-                    weight=agreement.agree * cell_area,
-                    pivot=pivot,
-                    information=information,
-                )
-            )
+            edge = _wall_edge(i, j, grids[i], grids[j], refined, pivot, agreement.agree * cell_area)
+            if edge is not None:
+                edges.append(edge)
     return edges
+
+
+def _wall_edge(
+    i: int,
+    j: int,
+    mi: GridMap,
+    mj: GridMap,
+    mapi_from_mapj: FloatArray,
+    pivot: FloatArray,
+    weight: float,
+) -> GraphEdge | None:
+    """The edge ``i``-``j`` trusted by the walls ``mi`` and ``mj`` (same resolution) share
+    about ``pivot`` under ``mapi_from_mapj``; None when they share none."""
+    walls = wall_information(mi, mj, mapi_from_mapj, pivot)
+    if not np.any(walls):
+        return None
+    # Each shared wall cell pins its normal to about a cell.
+    return GraphEdge(
+        i=i,
+        j=j,
+        mapi_from_mapj=mapi_from_mapj,
+        weight=weight,
+        pivot=pivot,
+        information=walls / mi.resolution**2,
+    )
 
 
 def refine_jointly(
@@ -410,14 +423,4 @@ def alignment_edge(
     pivot = _overlap_pivot(mi, mj, transform)
     if pivot is None:
         return None
-    walls = wall_information(mi, mj, transform, pivot)
-    if not np.any(walls):
-        return None
-    return GraphEdge(
-        i=i,
-        j=j,
-        mapi_from_mapj=transform,
-        weight=weight,
-        pivot=pivot,
-        information=walls / mi.resolution**2,
-    )
+    return _wall_edge(i, j, mi, mj, transform, pivot, weight)
