@@ -119,10 +119,13 @@ class MergeConfig:
     does without the cascade, to the same answer bit for bit (the cheap pass draws from a
     copy of the generator). The cheap pass answers only when no other placement it judged,
     confident or not, is an uncontradicted rival
-    (:func:`~mrslam_env.merge.decide.unsettled_rival`). Off by default: on held-out pairs
-    it merged a mirrored wing whose true placement only the virtual robot proposed
-    (docs/decisions.md, "The cascade"); it halves the time of the pairs it answers. No
-    effect when ``correlation_candidates`` is 0."""
+    (:func:`~mrslam_env.merge.decide.unsettled_rival`), and it also judges the wall
+    correlation's best distinct answers (``cascade_rivals``), so that a mirrored wing's
+    true placement is seen as a rival. Off by default: on a held-out set it merged a
+    chance fit of two maps without overlap that the whole pipeline refused, both on the
+    edge of ``max_conflict_fraction`` (docs/decisions.md, "The cascade's rival search");
+    it halves the time of the pairs it answers. No effect when ``correlation_candidates``
+    is 0."""
     cascade_rivals: int = 6
     """The cascade's rival search: its cheap pass refines and judges this many *distinct*
     wall-correlation placements (:func:`distinct_placements`: every local maximum over
