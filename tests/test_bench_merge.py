@@ -199,6 +199,8 @@ def test_benchmark_rows_summary_and_table(tmp_path) -> None:
     assert best["pairs_small"] == 4  # 60 x 80 grids
     assert rows[0]["largest_side_cells"] == 80
     assert rows[0]["agreement_estimate"] is not None
+    assert all(r["cpu_seconds"] >= 0.0 for r in rows)
+    assert best["median_cpu_seconds"] >= 0.0
 
     table = format_merge_table(summary, {"features": "No module named 'cv2'"})
     lines = table.splitlines()
@@ -207,6 +209,7 @@ def test_benchmark_rows_summary_and_table(tmp_path) -> None:
     assert "| wrong answers, all pairs (n=4) | 0 (0%) | 2 (50%) |" in lines
     assert "skipped features: No module named 'cv2'" in table
     assert "| median time, grids ≤ 400×400 (n=4) (s) |" in table
+    assert "| median CPU time per pair (s) |" in table
 
     csv_path = write_rows(tmp_path / "rows.csv", rows, {})
     assert csv_path.read_text().splitlines()[0].startswith("pair_id,scenario,overlap")

@@ -22,6 +22,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from merge_fixtures import map_pair, poses_near, scan_map
+from test_aliasing import RES as ROOMS_RES
+from test_aliasing import ROOM, left_room_seen_from, twin_rooms
+from test_aliasing import TRUTH as ROOMS_TRUTH
 
 from mrslam_env.evaluation import relative_transform_error
 from mrslam_env.geometry import compose, inverse, transform_points
@@ -29,11 +32,15 @@ from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.mapio import load_map, map_frame_from_lattice, save_map
 from mrslam_env.merge.dissimilarity import DissimilarityConfig, acceptance_index
 from mrslam_env.merge.fuse import resample_map
+from mrslam_env.merge.hypotheses import correlation_hypotheses
 from mrslam_env.merge.pipeline import (
+    ALL_PLACEMENTS,
     MergeConfig,
     MergeInputError,
     MergeResult,
+    distinct_placements,
     merge_maps,
+    same_answer,
 )
 from mrslam_env.merge.refine import RandomWalkConfig
 from mrslam_env.registry import build_world
@@ -314,6 +321,30 @@ def test_the_cascade_answers_from_the_cheap_pass_or_exactly_as_without_it(case: 
         assert "hypotheses" not in cascade.seconds  # a clean overlap: settled cheaply
     else:
         assert cascade.transform is None and _same_result(cascade, whole)
+
+
+def test_the_rival_search_gives_both_twin_rooms_as_distinct_answers() -> None:
+    """The cascade's rival search (``MergeConfig.cascade_rivals``, ``distinct_placements``):
+    over every local maximum of the wall correlation, the best few *answers*, pairwise
+    different; for a room of two identical rooms it holds both rooms, which the cheap
+    pass then judges as rivals instead of settling on one."""
+    m1 = twin_rooms()
+    m2 = left_room_seen_from(m1, ROOMS_TRUTH)
+    other_room = compose(np.array([ROOM * ROOMS_RES, 0.0, 0.0]), ROOMS_TRUTH)
+    config = MergeConfig()
+    w1, w2 = resample_map(m1, 0.1), resample_map(m2, 0.1)
+    placements = correlation_hypotheses(
+        w1, w2, replace(config.correlation, max_hypotheses=ALL_PLACEMENTS)
+    )
+    pivot = np.array([1.5, 1.5])  # a point of map 2's room, in map 2's frame
+    answers = distinct_placements(placements, pivot, config, 6)
+    assert 2 <= len(answers) <= 6
+    assert np.array_equal(answers[0], placements[0].map1_from_map2)
+    for i, a in enumerate(answers):
+        assert not any(same_answer(a, b, pivot, config) for b in answers[i + 1 :])
+    for placement in (ROOMS_TRUTH, other_room):
+        assert any(relative_transform_error(h, placement, pivot)[0] <= 0.3 for h in answers)
+    assert distinct_placements(placements, pivot, config, 1) == answers[:1]
 
 
 # -- 3. bad input, resolutions, large maps, determinism, configuration ----------------------

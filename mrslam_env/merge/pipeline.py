@@ -57,6 +57,7 @@ from mrslam_env.merge.dissimilarity import (
 from mrslam_env.merge.fuse import fuse_maps, resample_map
 from mrslam_env.merge.hypotheses import (
     CorrelationConfig,
+    Hypothesis,
     HypothesisConfig,
     HypothesisSet,
     correlation_hypotheses,
@@ -69,12 +70,14 @@ from mrslam_env.merge.virtual import VirtualRobotConfig
 from mrslam_env.validation import check_fields, require
 
 __all__ = [
+    "ALL_PLACEMENTS",
     "MergeConfig",
     "MergeInputError",
     "MergeResult",
     "MergeTrace",
     "ScoredHypothesis",
     "ambiguous_rival",
+    "distinct_placements",
     "merge_maps",
     "refine_transform",
     "same_answer",
@@ -116,10 +119,23 @@ class MergeConfig:
     does without the cascade, to the same answer bit for bit (the cheap pass draws from a
     copy of the generator). The cheap pass answers only when no other placement it judged,
     confident or not, is an uncontradicted rival
-    (:func:`~mrslam_env.merge.decide.unsettled_rival`). Off by default: on held-out pairs
-    it merged a mirrored wing whose true placement only the virtual robot proposed
-    (docs/decisions.md, "The cascade"); it halves the time of the pairs it answers. No
-    effect when ``correlation_candidates`` is 0."""
+    (:func:`~mrslam_env.merge.decide.unsettled_rival`), and it also judges the wall
+    correlation's best distinct answers (``cascade_rivals``), so that a mirrored wing's
+    true placement is seen as a rival. Off by default: on a held-out set it merged a
+    chance fit of two maps without overlap that the whole pipeline refused, both on the
+    edge of ``max_conflict_fraction`` (docs/decisions.md, "The cascade's rival search");
+    it halves the time of the pairs it answers. No effect when ``correlation_candidates``
+    is 0."""
+    cascade_rivals: int = 6
+    """The cascade's rival search: its cheap pass refines and judges this many *distinct*
+    wall-correlation placements (:func:`distinct_placements`: every local maximum over
+    the wall orientations' rotations, best first, one per answer), not only the
+    ``correlation_candidates`` best ones, before it may settle a merge. In a building
+    that repeats (a mirrored wing) the wall correlation often ranks the true placement
+    and its twin among its first few *answers* while its first few placements are the
+    twin's, a few cells apart; the rival then shows up in the cheap pass as it would in
+    the whole pipeline, and the decision step refuses, or the whole pipeline runs
+    (docs/decisions.md, "The cascade")."""
     virtual: VirtualRobotConfig = field(default_factory=VirtualRobotConfig)
     mcl: MclConfig = field(default_factory=MclConfig)
     pooling: HypothesisConfig = field(default_factory=HypothesisConfig)
@@ -265,7 +281,12 @@ class MergeConfig:
         ratio = self.max_resolution_ratio
         require(name, "max_resolution_ratio", ratio, ratio >= 1.0, ">= 1")
         require(name, "cascade", self.cascade, isinstance(self.cascade, bool), "a bool")
-        for attr in ("correlation_candidates", "hough_candidates", "symmetry_proposals"):
+        for attr in (
+            "correlation_candidates",
+            "hough_candidates",
+            "symmetry_proposals",
+            "cascade_rivals",
+        ):
             value = getattr(self, attr)
             whole = isinstance(value, int) and not isinstance(value, bool) and value >= 0
             require(name, attr, value, whole, "an int >= 0")
@@ -637,15 +658,19 @@ def _correlation_proposals(
     initials: list[tuple[FloatArray, float, int, str]],
     seconds: dict[str, float],
     stage: str,
+    placements: list[Hypothesis] | None = None,
 ) -> list[tuple[FloatArray, float, int, str]]:
     """``initials`` followed by the best ``correlation_candidates`` wall-correlation
     placements that are not duplicates of earlier entries, then ``hough_candidates``
     placements at the Hough spectra's rotations that are not (:func:`_hough_proposals`);
-    timed as ``<stage>.correlation`` and ``<stage>.hough``."""
+    timed as ``<stage>.correlation`` and ``<stage>.hough``. ``placements``: the wall
+    correlation's placements when already computed (best first; its first
+    ``correlation_candidates`` are those of the default ``max_hypotheses``)."""
     initials = list(initials)
     if config.correlation_candidates > 0:
         with _timed(seconds, f"{stage}.correlation"):
-            placements = correlation_hypotheses(work.w1, work.w2, config.correlation)
+            if placements is None:
+                placements = correlation_hypotheses(work.w1, work.w2, config.correlation)
             for placement in placements[: config.correlation_candidates]:
                 transform = placement.map1_from_map2
                 if not any(
@@ -656,6 +681,29 @@ def _correlation_proposals(
         with _timed(seconds, f"{stage}.hough"):
             initials += _hough_proposals(work, config, initials)
     return initials
+
+
+def distinct_placements(
+    placements: list[Hypothesis], pivot: FloatArray, config: MergeConfig, count: int
+) -> list[FloatArray]:
+    """The cascade's rival search (:attr:`MergeConfig.cascade_rivals`): the first ``count``
+    of ``placements`` (best first) that are different answers from every one kept before
+    (:func:`same_answer` at ``pivot``). Fed every local maximum of the wall correlation
+    (:func:`~mrslam_env.merge.hypotheses.correlation_hypotheses` with ``max_hypotheses``
+    :data:`ALL_PLACEMENTS`), it gives the correlation's best *answers*, where its best
+    placements are often one answer a few cells apart."""
+    kept: list[FloatArray] = []
+    for placement in placements:
+        if len(kept) >= count:
+            break
+        transform = placement.map1_from_map2
+        if not any(same_answer(transform, k, pivot, config) for k in kept):
+            kept.append(transform)
+    return kept
+
+
+ALL_PLACEMENTS = 1_000_000
+"""``max_hypotheses`` that keeps every local maximum of the wall correlation."""
 
 
 def _hough_proposals(
@@ -807,7 +855,18 @@ def _cheap_pass(
     (:func:`_score`, :func:`~mrslam_env.merge.decide.decide`). The ranked candidates,
     their walks and the decision when it accepts one; None otherwise (or when nothing was
     proposed)."""
-    initials = _correlation_proposals(work, config, [], seconds, "cascade")
+    with _timed(seconds, "cascade.placements"):
+        # every local maximum: its first few are the default call's, the rest the rivals'
+        placements = correlation_hypotheses(
+            work.w1, work.w2, replace(config.correlation, max_hypotheses=ALL_PLACEMENTS)
+        )
+    initials = _correlation_proposals(work, config, [], seconds, "cascade", placements)
+    if config.cascade_rivals > 0:
+        with _timed(seconds, "cascade.rivals"):
+            rivals = distinct_placements(placements, work.pivot, config, config.cascade_rivals)
+            for rival in rivals:
+                if not any(same_answer(rival, k[0], work.pivot, config) for k in initials):
+                    initials.append((rival, 0.0, 0, "correlation"))
     if not initials:
         return None
     with _timed(seconds, "cascade.judge"):

@@ -46,7 +46,8 @@ def summarize(
     ``median_/p90_translation_error`` (m) and ``median_/p90_rotation_error_deg`` over the
     transforms returned on overlapping pairs; ``proposal_recall_overlapping`` over the
     ``pairs_recall`` overlapping pairs whose rows carry ``proposal_hit`` (NaN for a method
-    without candidates); ``median_seconds`` per pair, and
+    without candidates); ``median_seconds`` per pair (wall time), ``median_cpu_seconds``
+    (CPU time; NaN for rows without it), and
     ``median_seconds_small`` over the ``pairs_small`` whose grids are at most
     ``small_side`` cells on a side; ``wrong_as_good_as_truth``: wrong answers on
     overlapping pairs whose :func:`cell_agreement` is at least the truth's (the maps alone
@@ -106,6 +107,9 @@ def summarize(
             "median_rotation_error_deg": _percentile(rotation, 50),
             "p90_rotation_error_deg": _percentile(rotation, 90),
             "median_seconds": _median([r["seconds"] for r in mine]),
+            "median_cpu_seconds": _median(
+                [r["cpu_seconds"] for r in mine if r.get("cpu_seconds") is not None]
+            ),
             "pairs_small": len(small),
             "median_seconds_small": _median([r["seconds"] for r in small]),
             "wrong_as_good_as_truth": sum(
@@ -196,6 +200,7 @@ def format_merge_table(
                 ),
             ),
             ("median time per pair (s)", lambda s: _number(s["median_seconds"], 2)),
+            ("median CPU time per pair (s)", lambda s: _number(s["median_cpu_seconds"], 2)),
             (
                 f"median time, grids ≤ 400×400 (n={first['pairs_small']}) (s)",
                 lambda s: _number(s["median_seconds_small"], 2),
