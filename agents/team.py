@@ -147,6 +147,18 @@ class TeamConfig:
     for the later robot: the detour would cost more exploration than the merge saves."""
     merged_map_every: int = 5
     """Steps between refreshes of the merged map while coordinating."""
+    seek_contact_after: int = 600
+    """Contact seeking (design §6): a robot that had a link to a robot outside its group
+    and has been without one for this many steps (0: never seek) drives back to where
+    it last had it, and waits there; its partner, which lost the same link on the same
+    step, does the same, so the two are back in range without knowing where the other
+    is. A robot that never had such a link explores on (the starts' places say nothing
+    about where the others are)."""
+    seek_contact_wait: int = 200
+    """Steps a contact-seeking robot waits at the place of its last link before it
+    explores again (and seeks again after another ``seek_contact_after`` steps); at
+    least until ``seek_contact_after`` steps after it began seeking, as long as its
+    partner may need to come back. A robot not back at the place by then gives up."""
     refine_every: int = 0
     """Steps between re-refinements of the transform on the grown maps (0: never, the
     default). The relation between the map frames is a constant, best estimated when it
@@ -158,15 +170,16 @@ class TeamConfig:
             self,
             non_negative=("min_map_area", "max_meeting_cost", "sight_margin"),
             positive=("peer_range",),
-            counts=("max_rendezvous", "merged_map_every"),
+            counts=("max_rendezvous", "merged_map_every", "seek_contact_wait"),
         )
         name = type(self).__name__
         factor = self.regrow_factor
         ok = isinstance(factor, int | float) and math.isfinite(factor) and factor >= 1
         require(name, "regrow_factor", factor, ok, "a finite number >= 1")
-        every = self.refine_every
-        ok = isinstance(every, int) and not isinstance(every, bool) and every >= 0
-        require(name, "refine_every", every, ok, "an int >= 0")
+        for attr in ("refine_every", "seek_contact_after"):
+            every = getattr(self, attr)
+            ok = isinstance(every, int) and not isinstance(every, bool) and every >= 0
+            require(name, attr, every, ok, "an int >= 0")
         margin, peer_range = self.sight_margin, self.peer_range
         require(name, "sight_margin", margin, margin < peer_range, f"< peer_range ({peer_range})")
 
@@ -438,6 +451,16 @@ class TeamCoordinator:
         refined on the two groups' maps: edges of the joint refinement."""
         self._maps: MapSource = _no_map
         """The robots' own maps (the last ``maps`` given to :meth:`act`)."""
+        self._contact_step: list[int | None] = [None] * n
+        """Per robot, the last step it had a link to a robot outside its group (None:
+        never)."""
+        self._contact_place: list[FloatArray] = [np.zeros(2) for _ in range(n)]
+        """Per robot, where it was then (own map frame)."""
+        self._seeking: list[tuple[int, int | None] | None] = [None] * n
+        """Per robot seeking contact: the step it began and the step it arrived at the
+        place (None while on its way); None when not seeking."""
+        self.seeking_steps = [0] * n
+        """Per robot, the steps it spent seeking contact (driving back and waiting)."""
 
     @classmethod
     def for_env(
@@ -569,6 +592,8 @@ class TeamCoordinator:
                 links[i, j] = links[j, i] = up
         self._links, self._reach = links, _reachable(links)
         self._observe_pair(observations)
+        if self.config.interaction and self.config.seek_contact_after:
+            self._seek_contact()
         if self.config.interaction:
             if self.state in (TeamState.NO_INTERACTION, TeamState.COORDINATED_EXPLORATION):
                 self._maybe_generate(observations, maps)
@@ -592,6 +617,55 @@ class TeamCoordinator:
             robot=robot, step=self.step, map=own_map, pose=pose, own_map=own_map
         )
         return self.policies[robot].act(observation, context)
+
+    # --- contact seeking -----------------------------------------------------------------
+
+    def _seek_contact(self) -> None:
+        """The contact-seeking rule (:attr:`TeamConfig.seek_contact_after`): a robot that
+        lost its link to the robots outside its group goes back to where it last had it
+        and waits there; any such link ends the seeking."""
+        config = self.config
+        after = config.seek_contact_after
+        for i in range(self.n_robots):
+            outside = [j for j in range(self.n_robots) if self.roots[j] != self.roots[i]]
+            if any(self._links[i, j] for j in outside):
+                self._contact_step[i] = self.step
+                self._contact_place[i] = self._poses[i][:2].copy()
+                if self._seeking[i] is not None:
+                    self._stop_seeking(i, f"link up again after {self.seeking_steps[i]} steps")
+                continue
+            seeking = self._seeking[i]
+            if seeking is not None:
+                self.seeking_steps[i] += 1
+                started, arrived = seeking
+                if arrived is None:
+                    if self.explorers[i].status in ("arrived", "goal_unreachable"):
+                        self._seeking[i] = (started, self.step)
+                    elif self.step - started >= after:
+                        self._stop_seeking(i, f"not back at the place in {after} steps")
+                # The partner, gone as long, may take up to ``after`` steps to come back.
+                elif self.step >= max(arrived + config.seek_contact_wait, started + after):
+                    self._stop_seeking(i, "no link at the place of the last one")
+                continue
+            last = self._contact_step[i]
+            if not outside or last is None or self._on_goal[i] or self.step - last < after:
+                continue
+            place = self._contact_place[i]
+            goal = transform_points(self.frames[i], place[None, :])[0]
+            self.explorers[i].set_goal(goal if self.coordinated(i) else place)
+            self._on_goal[i] = True
+            self._seeking[i] = (self.step, None)
+            self._decide(
+                f"robot_{i}: no link for {self.step - last} steps; back to where it last had "
+                f"one ({place[0]:.1f}, {place[1]:.1f} in its map) to seek contact"
+            )
+
+    def _stop_seeking(self, robot: int, why: str) -> None:
+        self._seeking[robot] = None
+        self._release(robot)
+        # The next search starts a full interval from now.
+        self._contact_step[robot] = self.step
+        self._decide(f"robot_{robot}: contact seeking ends ({why})")
 
     # --- the pair being merged ------------------------------------------------------------
 
@@ -781,13 +855,26 @@ class TeamCoordinator:
                     started=self.step,
                 )
                 if verdict:
-                    # Seen where predicted: confirm while both keep exploring (they move).
+                    # Seen where predicted: confirm on a short drive towards each other
+                    # (left to explore, the robots soon lose sight of each other).
                     rendezvous.in_place = True
                     self.rendezvous = rendezvous
                     self.state = TeamState.HYPOTHESIS_VERIFICATION
+                    how = "confirming while they move"
+                    meeting = self._meeting_point(hypothesis, maps)
+                    if meeting is not None and meeting[1] <= self.config.in_sight_range:
+                        point0 = meeting[0]
+                        rendezvous.meeting_point = point0
+                        point1 = transform_points(inverse(hypothesis), point0[None, :])[0]
+                        for side, goal in enumerate((point0, point1)):
+                            self._send(side, goal)
+                        how = (
+                            f"confirming on the way to ({point0[0]:.2f}, {point0[1]:.2f}), "
+                            f"{meeting[1]:.1f} m away"
+                        )
                     self._decide(
                         f"hypothesis #{index}: {names[0]} sees {names[1]} where predicted "
-                        "from here; confirming while they move"
+                        f"from here; {how}"
                     )
                     return
                 self._decide(
