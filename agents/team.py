@@ -51,6 +51,7 @@ its context's ``goal`` instead (:func:`agents.explorer.team_frontier_goals`, eve
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
@@ -150,10 +151,15 @@ class TeamConfig:
     seek_contact_after: int = 600
     """Contact seeking (design §6): a robot that had a link to a robot outside its group
     and has been without one for this many steps (0: never seek) drives back to where
-    it last had it, and waits there; its partner, which lost the same link on the same
-    step, does the same, so the two are back in range without knowing where the other
-    is. A robot that never had such a link explores on (the starts' places say nothing
-    about where the others are)."""
+    it had it (``seek_contact_back``), and waits there; its partner, which lost the same
+    link on the same step, does the same, so the two are back in range without knowing
+    where the other is. A robot that never had such a link explores on (the starts'
+    places say nothing about where the others are)."""
+    seek_contact_back: int = 100
+    """The place a contact-seeking robot goes back to is where it was this many steps
+    before the link was lost (or where the link came up, if later): the robots lose the
+    link at the edge of the radio's range, and the places they held together a little
+    earlier are well inside it."""
     seek_contact_wait: int = 200
     """Steps a contact-seeking robot waits at the place of its last link before it
     explores again (and seeks again after another ``seek_contact_after`` steps); at
@@ -170,7 +176,12 @@ class TeamConfig:
             self,
             non_negative=("min_map_area", "max_meeting_cost", "sight_margin"),
             positive=("peer_range",),
-            counts=("max_rendezvous", "merged_map_every", "seek_contact_wait"),
+            counts=(
+                "max_rendezvous",
+                "merged_map_every",
+                "seek_contact_back",
+                "seek_contact_wait",
+            ),
         )
         name = type(self).__name__
         factor = self.regrow_factor
@@ -454,8 +465,14 @@ class TeamCoordinator:
         self._contact_step: list[int | None] = [None] * n
         """Per robot, the last step it had a link to a robot outside its group (None:
         never)."""
-        self._contact_place: list[FloatArray] = [np.zeros(2) for _ in range(n)]
-        """Per robot, where it was then (own map frame)."""
+        self._contact_track: list[deque[FloatArray]] = [
+            deque(maxlen=self.config.seek_contact_back + 1) for _ in range(n)
+        ]
+        """Per robot, where it was (own map frame) on the last steps of its last link,
+        at most ``seek_contact_back + 1`` of them: the first is the place it seeks."""
+        self._seek_from = [0] * n
+        """Per robot, the step its time without a link counts from for the next search
+        (the end of the last one)."""
         self._seeking: list[tuple[int, int | None] | None] = [None] * n
         """Per robot seeking contact: the step it began and the step it arrived at the
         place (None while on its way); None when not seeking."""
@@ -622,15 +639,18 @@ class TeamCoordinator:
 
     def _seek_contact(self) -> None:
         """The contact-seeking rule (:attr:`TeamConfig.seek_contact_after`): a robot that
-        lost its link to the robots outside its group goes back to where it last had it
-        and waits there; any such link ends the seeking."""
+        lost its link to the robots outside its group goes back to where it was
+        ``seek_contact_back`` steps before it lost it and waits there; any such link ends
+        the seeking."""
         config = self.config
         after = config.seek_contact_after
         for i in range(self.n_robots):
             outside = [j for j in range(self.n_robots) if self.roots[j] != self.roots[i]]
             if any(self._links[i, j] for j in outside):
+                if self._contact_step[i] != self.step - 1:
+                    self._contact_track[i].clear()  # a new link: where it came up first
                 self._contact_step[i] = self.step
-                self._contact_place[i] = self._poses[i][:2].copy()
+                self._contact_track[i].append(self._poses[i][:2].copy())
                 if self._seeking[i] is not None:
                     self._stop_seeking(i, f"link up again after {self.seeking_steps[i]} steps")
                 continue
@@ -639,8 +659,11 @@ class TeamCoordinator:
                 self.seeking_steps[i] += 1
                 started, arrived = seeking
                 if arrived is None:
-                    if self.explorers[i].status in ("arrived", "goal_unreachable"):
+                    status = self.explorers[i].status
+                    if status == "arrived":
                         self._seeking[i] = (started, self.step)
+                    elif status == "goal_unreachable":
+                        self._stop_seeking(i, "the place is out of reach on its map")
                     elif self.step - started >= after:
                         self._stop_seeking(i, f"not back at the place in {after} steps")
                 # The partner, gone as long, may take up to ``after`` steps to come back.
@@ -648,23 +671,26 @@ class TeamCoordinator:
                     self._stop_seeking(i, "no link at the place of the last one")
                 continue
             last = self._contact_step[i]
-            if not outside or last is None or self._on_goal[i] or self.step - last < after:
+            if not outside or last is None or self._on_goal[i]:
                 continue
-            place = self._contact_place[i]
+            if self.step - max(last, self._seek_from[i]) < after:
+                continue
+            place = self._contact_track[i][0]
             goal = transform_points(self.frames[i], place[None, :])[0]
             self.explorers[i].set_goal(goal if self.coordinated(i) else place)
             self._on_goal[i] = True
             self._seeking[i] = (self.step, None)
+            back = len(self._contact_track[i]) - 1
             self._decide(
-                f"robot_{i}: no link for {self.step - last} steps; back to where it last had "
-                f"one ({place[0]:.1f}, {place[1]:.1f} in its map) to seek contact"
+                f"robot_{i}: no link for {self.step - last} steps; back to where it was "
+                f"{back} steps before losing it ({place[0]:.1f}, {place[1]:.1f} in its map) "
+                "to seek contact"
             )
 
     def _stop_seeking(self, robot: int, why: str) -> None:
         self._seeking[robot] = None
         self._release(robot)
-        # The next search starts a full interval from now.
-        self._contact_step[robot] = self.step
+        self._seek_from[robot] = self.step  # the next search a full interval from now
         self._decide(f"robot_{robot}: contact seeking ends ({why})")
 
     # --- the pair being merged ------------------------------------------------------------

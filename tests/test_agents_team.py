@@ -289,7 +289,7 @@ def test_contact_seeking_goes_back_to_where_the_link_was_last_up() -> None:
     np.testing.assert_allclose(team.explorers[0]._given_goal, [2.0, 1.0])
     np.testing.assert_allclose(team.explorers[1]._given_goal, [-3.0, 4.0])
     decisions = [d.text for d in team.pop_decisions()]
-    assert sum("back to where it last had one" in d for d in decisions) == 2, decisions
+    assert sum("back to where it was 0 steps before" in d for d in decisions) == 2, decisions
     # On the way the link comes up: the seeking ends, and what it cost is counted.
     for _ in range(10):
         _links_at(team, False, [[6.0, 1.0, 0.0], [-3.0, 9.0, 0.0]])
@@ -345,3 +345,22 @@ def test_no_contact_seeking_once_merged_or_when_switched_off() -> None:
         TeamConfig(seek_contact_after=-1)
     off = TeamCoordinator(TeamConfig(seek_contact_after=0), rng=np.random.default_rng(0))
     assert off.config.seek_contact_after == 0  # act() skips the rule altogether
+
+
+def test_contact_seeking_goes_back_to_well_inside_the_range() -> None:
+    config = TeamConfig(seek_contact_after=20, seek_contact_back=5, seek_contact_wait=10)
+    team = TeamCoordinator(config, rng=np.random.default_rng(0))
+    _links_at(team, True, [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])  # a first, short link
+    _links_at(team, False, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    for k in range(10):  # a second link while the robots part: lost at the range's edge
+        _links_at(team, True, [[float(k), 0.0, 0.0], [0.0, float(-k), 0.0]])
+    for _ in range(20):
+        _links_at(team, False, [[20.0, 0.0, 0.0], [0.0, -20.0, 0.0]])
+    # Five steps before the link was lost, not where the first link came up.
+    np.testing.assert_allclose(team.explorers[0]._given_goal, [4.0, 0.0])
+    np.testing.assert_allclose(team.explorers[1]._given_goal, [0.0, -4.0])
+    # A place out of reach on the robot's map ends its search.
+    team.explorers[1].status = "goal_unreachable"
+    _links_at(team, False, [[19.0, 0.0, 0.0], [0.0, -20.0, 0.0]])
+    assert team._on_goal == [True, False]
+    assert any("out of reach" in d.text for d in team.pop_decisions())
