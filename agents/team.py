@@ -255,6 +255,9 @@ class _Rendezvous:
     """Verified where the robots stand (no meeting point to drive to)."""
     first_match: int | None = None
     """Step of the first sighting that matched the prediction."""
+    last_match: int | None = None
+    """Step of the last sighting that matched (for a match where the robots stood: the
+    step of that match)."""
     matches: int = 0
     motion: float = 0.0
     """Both robots' travel since the first match, m."""
@@ -879,28 +882,17 @@ class TeamCoordinator:
                     index=index,
                     meeting_point=self._last_poses[0][:2].copy(),
                     started=self.step,
+                    last_match=self.step,
                 )
                 if verdict:
-                    # Seen where predicted: confirm on a short drive towards each other
-                    # (left to explore, the robots soon lose sight of each other).
+                    # Seen where predicted: confirm while both keep exploring (they move);
+                    # should they lose sight of each other, they drive to meet (_verify).
                     rendezvous.in_place = True
                     self.rendezvous = rendezvous
                     self.state = TeamState.HYPOTHESIS_VERIFICATION
-                    how = "confirming while they move"
-                    meeting = self._meeting_point(hypothesis, maps)
-                    if meeting is not None and meeting[1] <= self.config.in_sight_range:
-                        point0 = meeting[0]
-                        rendezvous.meeting_point = point0
-                        point1 = transform_points(inverse(hypothesis), point0[None, :])[0]
-                        for side, goal in enumerate((point0, point1)):
-                            self._send(side, goal)
-                        how = (
-                            f"confirming on the way to ({point0[0]:.2f}, {point0[1]:.2f}), "
-                            f"{meeting[1]:.1f} m away"
-                        )
                     self._decide(
                         f"hypothesis #{index}: {names[0]} sees {names[1]} where predicted "
-                        f"from here; {how}"
+                        "from here; confirming while they move"
                     )
                     return
                 self._decide(
@@ -1033,6 +1025,7 @@ class TeamCoordinator:
                     rendezvous.first_match = self.step
                     rendezvous.previous = poses
                 rendezvous.matches += 1
+                rendezvous.last_match = self.step
                 if (
                     rendezvous.matches >= config.confirm_sightings
                     and rendezvous.motion >= config.confirm_motion
@@ -1064,6 +1057,13 @@ class TeamCoordinator:
                 else:
                     rendezvous.unseen = 0
                 self._test_waiting(rendezvous, poses, maps)
+        if (
+            rendezvous.in_place
+            and rendezvous.last_match is not None
+            and self.step - rendezvous.last_match >= UNSEEN_STEPS
+            and self._drive_to_meet(rendezvous, maps)
+        ):
+            return
         if rendezvous.first_match is not None:
             if self.step - rendezvous.first_match >= config.confirm_steps:
                 self._set_aside(rendezvous, maps, "seen where predicted, but not confirmed")
@@ -1095,6 +1095,31 @@ class TeamCoordinator:
             self._reject(rendezvous, maps, "arrived and waited: the other robot was not there")
         elif self.step - rendezvous.started >= config.timeout_steps:
             self._reject(rendezvous, maps, "rendezvous timed out")
+
+    def _drive_to_meet(self, rendezvous: _Rendezvous, maps: MapSource) -> bool:
+        """A hypothesis matched where the robots stood, then they lost sight of each
+        other before it was confirmed (exploring on, they part): both drive to its
+        meeting point, and the confirmation goes on there as at any rendezvous. False
+        (nothing changed) when no meeting point is within ``max_meeting_cost``."""
+        hypothesis = rendezvous.hypothesis
+        meeting = self._meeting_point(hypothesis, maps)
+        if meeting is None or meeting[1] > self.config.max_meeting_cost:
+            return False
+        point0, cost = meeting
+        point1 = transform_points(inverse(hypothesis), point0[None, :])[0]
+        for side, goal in enumerate((point0, point1)):
+            self._send(side, goal)
+        rendezvous.in_place = False
+        rendezvous.meeting_point = point0
+        rendezvous.started = self.step
+        if rendezvous.first_match is not None:
+            rendezvous.first_match = self.step  # a full window to confirm at the meeting
+        self._decide(
+            f"hypothesis #{rendezvous.index}: out of sight for {UNSEEN_STEPS} steps before "
+            f"it was confirmed; both drive to meet at ({point0[0]:.2f}, {point0[1]:.2f}), "
+            f"later arrival after ~{cost:.1f} m"
+        )
+        return True
 
     def _test_waiting(
         self, rendezvous: _Rendezvous, poses: list[FloatArray], maps: MapSource
