@@ -51,6 +51,7 @@ its context's ``goal`` instead (:func:`agents.explorer.team_frontier_goals`, eve
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
@@ -147,6 +148,23 @@ class TeamConfig:
     for the later robot: the detour would cost more exploration than the merge saves."""
     merged_map_every: int = 5
     """Steps between refreshes of the merged map while coordinating."""
+    seek_contact_after: int = 600
+    """Contact seeking (design §6): a robot that had a link to a robot outside its group
+    and has been without one for this many steps (0: never seek) drives back to where
+    it had it (``seek_contact_back``), and waits there; its partner, which lost the same
+    link on the same step, does the same, so the two are back in range without knowing
+    where the other is. A robot that never had such a link explores on (the starts'
+    places say nothing about where the others are)."""
+    seek_contact_back: int = 100
+    """The place a contact-seeking robot goes back to is where it was this many steps
+    before the link was lost (or where the link came up, if later): the robots lose the
+    link at the edge of the radio's range, and the places they held together a little
+    earlier are well inside it."""
+    seek_contact_wait: int = 200
+    """Steps a contact-seeking robot waits at the place of its last link before it
+    explores again (and seeks again after another ``seek_contact_after`` steps); at
+    least until ``seek_contact_after`` steps after it began seeking, as long as its
+    partner may need to come back. A robot not back at the place by then gives up."""
     refine_every: int = 0
     """Steps between re-refinements of the transform on the grown maps (0: never, the
     default). The relation between the map frames is a constant, best estimated when it
@@ -158,15 +176,21 @@ class TeamConfig:
             self,
             non_negative=("min_map_area", "max_meeting_cost", "sight_margin"),
             positive=("peer_range",),
-            counts=("max_rendezvous", "merged_map_every"),
+            counts=(
+                "max_rendezvous",
+                "merged_map_every",
+                "seek_contact_back",
+                "seek_contact_wait",
+            ),
         )
         name = type(self).__name__
         factor = self.regrow_factor
         ok = isinstance(factor, int | float) and math.isfinite(factor) and factor >= 1
         require(name, "regrow_factor", factor, ok, "a finite number >= 1")
-        every = self.refine_every
-        ok = isinstance(every, int) and not isinstance(every, bool) and every >= 0
-        require(name, "refine_every", every, ok, "an int >= 0")
+        for attr in ("refine_every", "seek_contact_after"):
+            every = getattr(self, attr)
+            ok = isinstance(every, int) and not isinstance(every, bool) and every >= 0
+            require(name, attr, every, ok, "an int >= 0")
         margin, peer_range = self.sight_margin, self.peer_range
         require(name, "sight_margin", margin, margin < peer_range, f"< peer_range ({peer_range})")
 
@@ -231,6 +255,9 @@ class _Rendezvous:
     """Verified where the robots stand (no meeting point to drive to)."""
     first_match: int | None = None
     """Step of the first sighting that matched the prediction."""
+    last_match: int | None = None
+    """Step of the last sighting that matched (for a match where the robots stood: the
+    step of that match)."""
     matches: int = 0
     motion: float = 0.0
     """Both robots' travel since the first match, m."""
@@ -438,6 +465,22 @@ class TeamCoordinator:
         refined on the two groups' maps: edges of the joint refinement."""
         self._maps: MapSource = _no_map
         """The robots' own maps (the last ``maps`` given to :meth:`act`)."""
+        self._contact_step: list[int | None] = [None] * n
+        """Per robot, the last step it had a link to a robot outside its group (None:
+        never)."""
+        self._contact_track: list[deque[FloatArray]] = [
+            deque(maxlen=self.config.seek_contact_back + 1) for _ in range(n)
+        ]
+        """Per robot, where it was (own map frame) on the last steps of its last link,
+        at most ``seek_contact_back + 1`` of them: the first is the place it seeks."""
+        self._seek_from = [0] * n
+        """Per robot, the step its time without a link counts from for the next search
+        (the end of the last one)."""
+        self._seeking: list[tuple[int, int | None] | None] = [None] * n
+        """Per robot seeking contact: the step it began and the step it arrived at the
+        place (None while on its way); None when not seeking."""
+        self.seeking_steps = [0] * n
+        """Per robot, the steps it spent seeking contact (driving back and waiting)."""
 
     @classmethod
     def for_env(
@@ -569,6 +612,8 @@ class TeamCoordinator:
                 links[i, j] = links[j, i] = up
         self._links, self._reach = links, _reachable(links)
         self._observe_pair(observations)
+        if self.config.interaction and self.config.seek_contact_after:
+            self._seek_contact()
         if self.config.interaction:
             if self.state in (TeamState.NO_INTERACTION, TeamState.COORDINATED_EXPLORATION):
                 self._maybe_generate(observations, maps)
@@ -592,6 +637,64 @@ class TeamCoordinator:
             robot=robot, step=self.step, map=own_map, pose=pose, own_map=own_map
         )
         return self.policies[robot].act(observation, context)
+
+    # --- contact seeking -----------------------------------------------------------------
+
+    def _seek_contact(self) -> None:
+        """The contact-seeking rule (:attr:`TeamConfig.seek_contact_after`): a robot that
+        lost its link to the robots outside its group goes back to where it was
+        ``seek_contact_back`` steps before it lost it and waits there; any such link ends
+        the seeking."""
+        config = self.config
+        after = config.seek_contact_after
+        for i in range(self.n_robots):
+            outside = [j for j in range(self.n_robots) if self.roots[j] != self.roots[i]]
+            if any(self._links[i, j] for j in outside):
+                if self._contact_step[i] != self.step - 1:
+                    self._contact_track[i].clear()  # a new link: where it came up first
+                self._contact_step[i] = self.step
+                self._contact_track[i].append(self._poses[i][:2].copy())
+                if self._seeking[i] is not None:
+                    self._stop_seeking(i, f"link up again after {self.seeking_steps[i]} steps")
+                continue
+            seeking = self._seeking[i]
+            if seeking is not None:
+                self.seeking_steps[i] += 1
+                started, arrived = seeking
+                if arrived is None:
+                    status = self.explorers[i].status
+                    if status == "arrived":
+                        self._seeking[i] = (started, self.step)
+                    elif status == "goal_unreachable":
+                        self._stop_seeking(i, "the place is out of reach on its map")
+                    elif self.step - started >= after:
+                        self._stop_seeking(i, f"not back at the place in {after} steps")
+                # The partner, gone as long, may take up to ``after`` steps to come back.
+                elif self.step >= max(arrived + config.seek_contact_wait, started + after):
+                    self._stop_seeking(i, "no link at the place of the last one")
+                continue
+            last = self._contact_step[i]
+            if not outside or last is None or self._on_goal[i]:
+                continue
+            if self.step - max(last, self._seek_from[i]) < after:
+                continue
+            place = self._contact_track[i][0]
+            goal = transform_points(self.frames[i], place[None, :])[0]
+            self.explorers[i].set_goal(goal if self.coordinated(i) else place)
+            self._on_goal[i] = True
+            self._seeking[i] = (self.step, None)
+            back = len(self._contact_track[i]) - 1
+            self._decide(
+                f"robot_{i}: no link for {self.step - last} steps; back to where it was "
+                f"{back} steps before losing it ({place[0]:.1f}, {place[1]:.1f} in its map) "
+                "to seek contact"
+            )
+
+    def _stop_seeking(self, robot: int, why: str) -> None:
+        self._seeking[robot] = None
+        self._release(robot)
+        self._seek_from[robot] = self.step  # the next search a full interval from now
+        self._decide(f"robot_{robot}: contact seeking ends ({why})")
 
     # --- the pair being merged ------------------------------------------------------------
 
@@ -779,9 +882,11 @@ class TeamCoordinator:
                     index=index,
                     meeting_point=self._last_poses[0][:2].copy(),
                     started=self.step,
+                    last_match=self.step,
                 )
                 if verdict:
-                    # Seen where predicted: confirm while both keep exploring (they move).
+                    # Seen where predicted: confirm while both keep exploring (they move);
+                    # should they lose sight of each other, they drive to meet (_verify).
                     rendezvous.in_place = True
                     self.rendezvous = rendezvous
                     self.state = TeamState.HYPOTHESIS_VERIFICATION
@@ -920,6 +1025,7 @@ class TeamCoordinator:
                     rendezvous.first_match = self.step
                     rendezvous.previous = poses
                 rendezvous.matches += 1
+                rendezvous.last_match = self.step
                 if (
                     rendezvous.matches >= config.confirm_sightings
                     and rendezvous.motion >= config.confirm_motion
@@ -951,6 +1057,13 @@ class TeamCoordinator:
                 else:
                     rendezvous.unseen = 0
                 self._test_waiting(rendezvous, poses, maps)
+        if (
+            rendezvous.in_place
+            and rendezvous.last_match is not None
+            and self.step - rendezvous.last_match >= UNSEEN_STEPS
+            and self._drive_to_meet(rendezvous, maps)
+        ):
+            return
         if rendezvous.first_match is not None:
             if self.step - rendezvous.first_match >= config.confirm_steps:
                 self._set_aside(rendezvous, maps, "seen where predicted, but not confirmed")
@@ -982,6 +1095,31 @@ class TeamCoordinator:
             self._reject(rendezvous, maps, "arrived and waited: the other robot was not there")
         elif self.step - rendezvous.started >= config.timeout_steps:
             self._reject(rendezvous, maps, "rendezvous timed out")
+
+    def _drive_to_meet(self, rendezvous: _Rendezvous, maps: MapSource) -> bool:
+        """A hypothesis matched where the robots stood, then they lost sight of each
+        other before it was confirmed (exploring on, they part): both drive to its
+        meeting point, and the confirmation goes on there as at any rendezvous. False
+        (nothing changed) when no meeting point is within ``max_meeting_cost``."""
+        hypothesis = rendezvous.hypothesis
+        meeting = self._meeting_point(hypothesis, maps)
+        if meeting is None or meeting[1] > self.config.max_meeting_cost:
+            return False
+        point0, cost = meeting
+        point1 = transform_points(inverse(hypothesis), point0[None, :])[0]
+        for side, goal in enumerate((point0, point1)):
+            self._send(side, goal)
+        rendezvous.in_place = False
+        rendezvous.meeting_point = point0
+        rendezvous.started = self.step
+        if rendezvous.first_match is not None:
+            rendezvous.first_match = self.step  # a full window to confirm at the meeting
+        self._decide(
+            f"hypothesis #{rendezvous.index}: out of sight for {UNSEEN_STEPS} steps before "
+            f"it was confirmed; both drive to meet at ({point0[0]:.2f}, {point0[1]:.2f}), "
+            f"later arrival after ~{cost:.1f} m"
+        )
+        return True
 
     def _test_waiting(
         self, rendezvous: _Rendezvous, poses: list[FloatArray], maps: MapSource

@@ -434,6 +434,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                 "rotation_error": None,
                 "hypotheses_tested": team.hypotheses_tested,
                 "step_verified": team.step_verified,
+                "seeking_steps": sum(team.seeking_steps),
             }
             if len(agents) > 2:
                 merge_report["joined"] = len(joined)

@@ -121,6 +121,7 @@ def test_a_hypothesis_that_puts_the_robots_in_sight_is_settled_where_they_stand(
             # with no drive to a meeting point.
             assert team.state is TeamState.HYPOTHESIS_VERIFICATION, decisions
             assert team.rendezvous is not None and team.rendezvous.in_place
+            assert not any(team._on_goal), decisions
             for _ in range(200):
                 actions = team.act([observations[a] for a in agents], maps)
                 observations, *_ = env.step({a: actions[i] for i, a in enumerate(agents)})
@@ -260,3 +261,140 @@ def test_the_drive_for_one_hypothesis_tests_the_others_waiting() -> None:
     team._meeting_point = lambda hypothesis, maps: (np.array([12.0, 5.0]), 3.0)  # type: ignore[method-assign]
     team._start_rendezvous(1, lambda i: free)
     assert team.rendezvous is not None and team.rendezvous.hypothesis is far
+
+
+def _links_at(team: TeamCoordinator, up: bool, poses: list[list[float]]) -> None:
+    """One step of the contact-seeking rule with the link ``up`` and the robots at
+    ``poses`` (own map frames)."""
+    team.step += 1
+    team._poses = [np.array(p, dtype=np.float64) for p in poses]
+    team._links = np.array([[False, up], [up, False]])
+    team._seek_contact()
+
+
+def test_contact_seeking_goes_back_to_where_the_link_was_last_up() -> None:
+    config = TeamConfig(seek_contact_after=50, seek_contact_wait=20)
+    team = TeamCoordinator(config, rng=np.random.default_rng(0))
+    for _ in range(100):  # never had a link: both explore on, whatever the time
+        _links_at(team, False, [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    assert team._seeking == [None, None] and not any(team._on_goal)
+    _links_at(team, True, [[2.0, 1.0, 0.0], [-3.0, 4.0, 0.0]])  # the last link, step 101
+    for _ in range(49):
+        _links_at(team, False, [[10.0, 1.0, 0.0], [-3.0, 15.0, 0.0]])
+    assert not any(team._on_goal)
+    _links_at(team, False, [[10.0, 1.0, 0.0], [-3.0, 15.0, 0.0]])  # 50 steps without
+    assert all(team._on_goal) and team._seeking == [(151, None), (151, None)]
+    np.testing.assert_allclose(team.explorers[0]._given_goal, [2.0, 1.0])
+    np.testing.assert_allclose(team.explorers[1]._given_goal, [-3.0, 4.0])
+    decisions = [d.text for d in team.pop_decisions()]
+    assert sum("back to where it was 0 steps before" in d for d in decisions) == 2, decisions
+    # On the way the link comes up: the seeking ends, and what it cost is counted.
+    for _ in range(10):
+        _links_at(team, False, [[6.0, 1.0, 0.0], [-3.0, 9.0, 0.0]])
+    _links_at(team, True, [[5.0, 1.0, 0.0], [-3.0, 8.0, 0.0]])
+    assert team._seeking == [None, None] and not any(team._on_goal)
+    assert team.seeking_steps == [10, 10]
+    assert any("link up again" in d.text for d in team.pop_decisions())
+
+
+def test_contact_seeking_waits_at_the_place_then_explores_again() -> None:
+    config = TeamConfig(seek_contact_after=30, seek_contact_wait=20)
+    team = TeamCoordinator(config, rng=np.random.default_rng(0))
+    _links_at(team, True, [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    for _ in range(30):
+        _links_at(team, False, [[5.0, 0.0, 0.0], [5.0, 0.0, 0.0]])
+    assert all(team._on_goal)
+    started = team.step
+    for _ in range(3):
+        _links_at(team, False, [[3.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
+    team.explorers[0].status = "arrived"  # robot 0's leg to the place ends
+    _links_at(team, False, [[0.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
+    arrived = team.step
+    assert team._seeking == [(started, arrived), (started, None)]
+    for _ in range(19):
+        _links_at(team, False, [[0.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
+    assert all(team._on_goal)
+    # Robot 1 is not back 30 steps after it began: it gives up; robot 0 waited its 20
+    # steps, but waits on for as long as robot 1 could still have come back.
+    for _ in range(started + 29 - team.step):
+        _links_at(team, False, [[0.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
+    assert all(team._on_goal)
+    _links_at(team, False, [[0.0, 0.0, 0.0], [3.0, 0.0, 0.0]])  # 30 steps since it began
+    assert team._seeking == [None, None] and not any(team._on_goal)
+    decisions = [d.text for d in team.pop_decisions()]
+    assert any("robot_0: contact seeking ends (no link at the place" in d for d in decisions)
+    assert any("robot_1: contact seeking ends (not back" in d for d in decisions)
+    # The next search only after another full interval without a link.
+    for _ in range(29):
+        _links_at(team, False, [[5.0, 0.0, 0.0], [5.0, 0.0, 0.0]])
+    assert not any(team._on_goal)
+    _links_at(team, False, [[5.0, 0.0, 0.0], [5.0, 0.0, 0.0]])
+    assert all(team._on_goal)
+
+
+def test_no_contact_seeking_once_merged_or_when_switched_off() -> None:
+    team = TeamCoordinator(TeamConfig(seek_contact_after=10), rng=np.random.default_rng(0))
+    team.roots = [0, 0]  # one group: nobody left to seek
+    _links_at(team, True, [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    for _ in range(50):
+        _links_at(team, False, [[5.0, 0.0, 0.0], [5.0, 0.0, 0.0]])
+    assert not any(team._on_goal)
+    with pytest.raises(ValueError, match="seek_contact_after"):
+        TeamConfig(seek_contact_after=-1)
+    off = TeamCoordinator(TeamConfig(seek_contact_after=0), rng=np.random.default_rng(0))
+    assert off.config.seek_contact_after == 0  # act() skips the rule altogether
+
+
+def test_contact_seeking_goes_back_to_well_inside_the_range() -> None:
+    config = TeamConfig(seek_contact_after=20, seek_contact_back=5, seek_contact_wait=10)
+    team = TeamCoordinator(config, rng=np.random.default_rng(0))
+    _links_at(team, True, [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])  # a first, short link
+    _links_at(team, False, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    for k in range(10):  # a second link while the robots part: lost at the range's edge
+        _links_at(team, True, [[float(k), 0.0, 0.0], [0.0, float(-k), 0.0]])
+    for _ in range(20):
+        _links_at(team, False, [[20.0, 0.0, 0.0], [0.0, -20.0, 0.0]])
+    # Five steps before the link was lost, not where the first link came up.
+    np.testing.assert_allclose(team.explorers[0]._given_goal, [4.0, 0.0])
+    np.testing.assert_allclose(team.explorers[1]._given_goal, [0.0, -4.0])
+    # A place out of reach on the robot's map ends its search.
+    team.explorers[1].status = "goal_unreachable"
+    _links_at(team, False, [[19.0, 0.0, 0.0], [0.0, -20.0, 0.0]])
+    assert team._on_goal == [True, False]
+    assert any("out of reach" in d.text for d in team.pop_decisions())
+
+
+def test_a_match_where_they_stand_lost_from_sight_is_confirmed_at_a_meeting() -> None:
+    starts = ((5.0, 8.0, 0.0), (8.0, 8.2, np.pi))
+    truth = compose(inverse(np.array(starts[0])), np.array(starts[1]))
+    env = MultiRobotSlamEnv(scenario="office", seed=0, config=EnvConfig(starts=starts))
+    observations, _ = env.reset()
+    agents = env.possible_agents
+    maps = MapCache(env)
+    team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0))
+    team._retry_area = {(0, 1): np.inf}  # no merge of its own: the hypothesis is injected
+    team.act([observations[a] for a in agents], maps)
+    team.hypotheses = [truth]
+    team._start_rendezvous(0, maps)
+    assert team.rendezvous is not None and team.rendezvous.in_place
+    # The robots part: the peer sensor sees nothing for UNSEEN_STEPS steps.
+    for _ in range(UNSEEN_STEPS):
+        blind = [
+            {**observations[a], "peer": np.zeros_like(observations[a]["peer"])} for a in agents
+        ]
+        actions = team.act(blind, maps)
+        observations, *_ = env.step({a: actions[i] for i, a in enumerate(agents)})
+    decisions = [d.text for d in team.pop_decisions()]
+    assert any("both drive to meet" in d for d in decisions), decisions
+    assert team.rendezvous is not None and not team.rendezvous.in_place
+    assert all(team._on_goal)
+    for _ in range(300):  # the rendezvous as any other: seen at the meeting, accepted
+        actions = team.act([observations[a] for a in agents], maps)
+        observations, *_ = env.step({a: actions[i] for i, a in enumerate(agents)})
+        decisions += [d.text for d in team.pop_decisions()]
+        if team.state is not TeamState.HYPOTHESIS_VERIFICATION:
+            break
+    assert team.state is TeamState.COORDINATED_EXPLORATION, decisions
+    assert team.transform is not None
+    error = compose(inverse(truth), team.transform)
+    assert np.hypot(error[0], error[1]) < 0.1 and abs(error[2]) < np.radians(1.0)

@@ -1,9 +1,10 @@
 """The scenario catalogue: every world is a closed building a robot can drive through.
 
-Checked on the ground-truth raster at 5 cm (ground_truth_map) for every hand-made world and
-procedural seeds 0..9: start poses free, clear and far apart; the building sealed from the
-outside; the free space passable for a 0.2 m robot (no sealed rooms); the procedural
-generator deterministic and varied; the two wings of ``twin_wings`` true copies.
+Checked on the ground-truth raster at 5 cm (ground_truth_map) for every hand-made world,
+procedural seeds 0..9 and procedural_large seeds 0..3: start poses free, clear and far
+apart; the building sealed from the outside; the free space passable for a 0.2 m robot (no
+sealed rooms); the procedural generator deterministic and varied; the two wings of
+``twin_wings`` true copies; the large plans wider than the radio's range.
 """
 
 from __future__ import annotations
@@ -17,11 +18,17 @@ import pytest
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from mrslam_env.config import CommConfig
 from mrslam_env.gridmap import GridMap
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
 from scenarios.worlds import buildings
 from scenarios.worlds.catalog import SCENARIOS, Scenario
-from scenarios.worlds.procedural import ProceduralConfig, build_procedural, generate_floor_plan
+from scenarios.worlds.procedural import (
+    ProceduralConfig,
+    build_procedural,
+    build_procedural_large,
+    generate_floor_plan,
+)
 from scenarios.worlds.real import REAL_BUILDINGS
 
 RESOLUTION = 0.05  # m per cell of the test rasters
@@ -40,7 +47,11 @@ HAND_MADE = [
     name for name, s in SCENARIOS.items() if not s.parametric and name not in REAL_BUILDINGS
 ]
 CASES = [(name, 0) for name in HAND_MADE] + [("procedural", seed) for seed in PROCEDURAL_SEEDS]
+LARGE_SEEDS = range(4)
+LARGE_CASES = [("procedural_large", seed) for seed in LARGE_SEEDS]
+ALL_CASES = CASES + LARGE_CASES
 CASE_IDS = [f"{name}-{seed}" for name, seed in CASES]
+ALL_IDS = [f"{name}-{seed}" for name, seed in ALL_CASES]
 
 
 @cache
@@ -76,13 +87,14 @@ def wall_clearance(grid: GridMap) -> NDArray[np.float64]:
 
 
 def test_catalogue_holds_the_builtin_scenarios() -> None:
-    built = {"office", "warehouse", "maze", "twin_wings", "procedural"}
+    built = {"office", "warehouse", "maze", "twin_wings", "procedural", "procedural_large"}
     assert set(SCENARIOS) == built | set(REAL_BUILDINGS)
     for name, scenario in SCENARIOS.items():
         assert isinstance(scenario, Scenario)
         assert scenario.name == name
         assert scenario.description and "\n" not in scenario.description
-    assert [name for name, s in SCENARIOS.items() if s.parametric] == ["procedural"]
+    parametric = [name for name, s in SCENARIOS.items() if s.parametric]
+    assert parametric == ["procedural", "procedural_large"]
 
 
 def test_catalogue_is_the_registered_entry_point() -> None:
@@ -141,7 +153,7 @@ def test_world_size_and_wall_count_are_moderate(name: str, seed: int) -> None:
     assert len(world.starts) == 2
 
 
-@pytest.mark.parametrize(("name", "seed"), CASES, ids=CASE_IDS)
+@pytest.mark.parametrize(("name", "seed"), ALL_CASES, ids=ALL_IDS)
 def test_starts_are_free_and_clear(name: str, seed: int) -> None:
     world, grid = world_of(name, seed), raster_of(name, seed)
     rows, cols = start_cells(grid, world).T
@@ -150,7 +162,7 @@ def test_starts_are_free_and_clear(name: str, seed: int) -> None:
     assert np.all(clearance >= MIN_START_CLEARANCE), clearance
 
 
-@pytest.mark.parametrize(("name", "seed"), CASES, ids=CASE_IDS)
+@pytest.mark.parametrize(("name", "seed"), ALL_CASES, ids=ALL_IDS)
 def test_starts_are_far_apart_and_face_different_ways(name: str, seed: int) -> None:
     first, second = world_of(name, seed).starts
     assert np.hypot(*(first[:2] - second[:2])) >= MIN_START_DISTANCE
@@ -158,7 +170,7 @@ def test_starts_are_far_apart_and_face_different_ways(name: str, seed: int) -> N
     assert heading_difference >= MIN_HEADING_DIFFERENCE
 
 
-@pytest.mark.parametrize(("name", "seed"), CASES, ids=CASE_IDS)
+@pytest.mark.parametrize(("name", "seed"), ALL_CASES, ids=ALL_IDS)
 def test_building_is_enclosed(name: str, seed: int) -> None:
     world, grid = world_of(name, seed), raster_of(name, seed)
     inside = building_component(grid, world)
@@ -170,7 +182,7 @@ def test_building_is_enclosed(name: str, seed: int) -> None:
     assert grid.free[0, 0] and not inside[0, 0]
 
 
-@pytest.mark.parametrize(("name", "seed"), CASES, ids=CASE_IDS)
+@pytest.mark.parametrize(("name", "seed"), ALL_CASES, ids=ALL_IDS)
 def test_robot_can_drive_everywhere(name: str, seed: int) -> None:
     """Erode the free space by the robot's radius (plus a margin): the robot centre's
     space must join both starts, leave no sizeable pocket out of reach (no sealed rooms,
@@ -234,6 +246,19 @@ def test_procedural_has_at_least_five_rooms(seed: int) -> None:
     rooms, _ = ndimage.label((wall_clearance(grid) >= 0.55) & building_component(grid, world))
     areas = np.bincount(rooms.ravel())[1:] * RESOLUTION**2
     assert np.count_nonzero(areas >= 2.0) >= 5
+
+
+@pytest.mark.parametrize("seed", LARGE_SEEDS)
+def test_procedural_large_is_larger_than_the_radio_range(seed: int) -> None:
+    world = world_of("procedural_large", seed)
+    assert world.name == f"procedural_large-{seed}"
+    assert np.array_equal(world.walls, build_procedural_large(seed).walls)
+    xmin, ymin, xmax, ymax = world.bounds
+    sides = sorted((xmax - xmin, ymax - ymin))
+    assert 24.0 <= sides[0] <= 30.5 and 36.0 <= sides[1] <= 44.5, world.bounds
+    # The starts are out of radio range of each other: the link is down at step 0.
+    first, second = world.starts
+    assert np.hypot(*(first[:2] - second[:2])) > 2.0 * CommConfig().comm_range
 
 
 def test_procedural_rooms_tile_the_floor() -> None:

@@ -30,6 +30,10 @@ Reported per scenario:
 ``wrong_accepted``         verified merges off by more than 0.10 m or 1° (must be 0)
 ``translation_error``      median, p90 and max translation error (m) of the verified
                            merges; ``rotation_error`` the same in degrees
+``verified_before_t90``    team runs that verified their merge before their maps
+                           covered 90 % (or verified it in a run that never did)
+``seeking_steps``          robot-steps the team runs spent seeking contact (driving
+                           back to the place of the last link and waiting there)
 ``collisions[mode]``       collision steps per run (summed over the moving robots):
                            median, max, and the median as % of the moving robots' steps
 =========================  ==========================================================
@@ -189,12 +193,24 @@ def run_row(report: dict[str, Any]) -> dict[str, Any]:
         "rotation_error": merge["rotation_error"],
         "hypotheses_tested": merge["hypotheses_tested"],
         "step_verified": merge["step_verified"],
+        "verified_before_t90": _verified_before_t90(report),
+        "seeking_steps": merge.get("seeking_steps", 0),
         "coverage": report["coverage"]["merged"],
         "steps": report["steps"],
         "collision_steps": sum(collisions[agent] for agent in moving),
         "robot_steps": report["steps"] * len(moving),
         "wall_time": report["wall_time"],
     }
+
+
+def _verified_before_t90(report: dict[str, Any]) -> bool:
+    """Whether the run verified its merge before its maps covered 90 % (or verified it
+    in a run that never got there)."""
+    step = report["merge"]["step_verified"]
+    if step is None:
+        return False
+    t90 = report["t90"]
+    return t90 is None or step * report["sim_time"] / max(report["steps"], 1) <= t90
 
 
 def _report_name(report: dict[str, Any]) -> str:
@@ -398,6 +414,8 @@ def _summarise(
         "max_translation_error": None if translation is None else translation[2],
         "max_rotation_error": None if rotation is None else rotation[2],
         "hypotheses_tested": sum(r["hypotheses_tested"] for r in team),
+        "verified_before_t90": sum(r.get("verified_before_t90", False) for r in team),
+        "seeking_steps": sum(r.get("seeking_steps", 0) for r in team),
         "collisions": collisions,
     }
 
@@ -423,12 +441,13 @@ def format_explore_table(rows: Sequence[dict[str, Any]]) -> str:
         + "t90 team (s) | t90 independent (s) | t90 oracle (s) | t90 single (s) | "
         "speed-up indep/team | share of oracle gain | faster | verified | wrong accepted | "
         "error m med / p90 / max | error ° med / p90 / max | "
-        "collision steps team med / max (% steps) | hypotheses tested |",
+        "collision steps team med / max (% steps) | hypotheses tested | "
+        "verified before t90 | contact seeking (robot-steps) |",
         "| --- | "
         + ("--- | " if by_policy else "")
         + ("---: | ---: | " if by_size else "")
         + "---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
-        "| ---: | ---: |",
+        "| ---: | ---: | ---: | ---: |",
     ]
     for row in rows:
         translation, rotation = row["translation_error"], row["rotation_error"]
@@ -453,6 +472,7 @@ def format_explore_table(rows: Sequence[dict[str, Any]]) -> str:
             f"{_time(row, 'oracle')} | {_time(row, 'single')} | {speedup} | {share_text} | "
             f"{row['faster']}/{row['runs']} | {row['verified']}/{row['runs']} | "
             f"{row['wrong_accepted']} | {t_error} | {r_error} | {collisions} | "
-            f"{row['hypotheses_tested']} |"
+            f"{row['hypotheses_tested']} | {row.get('verified_before_t90', 0)}/{row['runs']} | "
+            f"{row.get('seeking_steps', 0)} |"
         )
     return "\n".join(lines)

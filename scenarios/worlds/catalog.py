@@ -4,15 +4,16 @@ The environment finds worlds through the ``mrslam.scenarios`` entry point, which
 :data:`SCENARIOS` from here; other packages can register their own mappings of
 :class:`Scenario` under the same entry-point group.
 
-==============  ===========  ====================================================
-name            size (m)     character
-==============  ===========  ====================================================
-``office``      28 x 16      corridor, nine rooms, open-plan area (the default)
-``warehouse``   33 x 20      long parallel shelving aisles: repetitive
-``maze``        21.6 x 16.2  grid maze of 1.8 m cells with a few loops
-``twin_wings``  32 x 14      two identical wings: a trap for map merging
-``procedural``  18-28 sides  seeded office-like floor plans (``build(seed)``)
-==============  ===========  ====================================================
+====================  =============  ===================================================
+name                  size (m)       character
+====================  =============  ===================================================
+``office``            28 x 16        corridor, nine rooms, open-plan area (the default)
+``warehouse``         33 x 20        long parallel shelving aisles: repetitive
+``maze``              21.6 x 16.2    grid maze of 1.8 m cells with a few loops
+``twin_wings``        32 x 14        two identical wings: a trap for map merging
+``procedural``        18-28 sides    seeded office-like floor plans (``build(seed)``)
+``procedural_large``  36-44 x 24-30  the same plans larger than the radio's range (12 m)
+====================  =============  ===================================================
 
 Real buildings (:mod:`scenarios.worlds.real`, SLAM maps of real places):
 ``aws_warehouse``, ``aws_warehouse_lowres``, ``bookstore``, ``small_house``,
@@ -27,7 +28,7 @@ from types import MappingProxyType
 
 from mrslam_env.sim.world import WorldSpec
 from scenarios.worlds import buildings
-from scenarios.worlds.procedural import build_procedural
+from scenarios.worlds.procedural import build_procedural, build_procedural_large
 from scenarios.worlds.real import REAL_BUILDINGS, build_real
 
 __all__ = ["DEFAULT_SCENARIO", "SCENARIOS", "Scenario"]
@@ -104,6 +105,13 @@ SCENARIOS: Mapping[str, Scenario] = MappingProxyType(
                 description="seeded office-like floor plans: BSP rooms, corridors, doors "
                 "(18-28 m; build(seed))",
                 build=build_procedural,
+                parametric=True,
+            ),
+            Scenario(
+                name="procedural_large",
+                description="seeded office-like floor plans larger than the comm range "
+                "(36-44 x 24-30 m, starts 25-40 m apart; build(seed))",
+                build=build_procedural_large,
                 parametric=True,
             ),
             *(

@@ -38,6 +38,7 @@ from mrslam_env.sim.world import (
 from mrslam_env.validation import check_fields, require
 
 __all__ = [
+    "LARGE_CONFIG",
     "FloorPlan",
     "Opening",
     "ProceduralConfig",
@@ -45,6 +46,7 @@ __all__ = [
     "RoomKind",
     "SharedWall",
     "build_procedural",
+    "build_procedural_large",
     "carve_floor_plan",
     "choose_openings",
     "choose_starts",
@@ -667,4 +669,26 @@ def build_procedural(seed: int = 0, config: ProceduralConfig | None = None) -> W
             f"procedural office, seed {seed}: {plan.room_count} rooms "
             f"({plan.width:g} x {plan.depth:g} m)"
         ),
+    )
+
+
+LARGE_CONFIG = ProceduralConfig(long_side=(36.0, 44.0), short_side=(24.0, 30.0))
+"""The generator's parameters for floors larger than the radio's range: the default
+office-like plans at about twice the side (36-44 m by 24-30 m), the two starts in far-apart
+rooms 25-40 m apart, two to three times the default comm range (12 m)."""
+
+
+def build_procedural_large(seed: int = 0) -> WorldSpec:
+    """A large office-like world drawn from ``seed`` (:data:`LARGE_CONFIG`).
+
+    Returns
+    -------
+    WorldSpec
+        Named ``procedural_large-<seed>``.
+    """
+    world = build_procedural(seed, LARGE_CONFIG)
+    return replace(
+        world,
+        name=f"procedural_large-{seed}",
+        description=world.description.replace("procedural office", "large procedural office"),
     )
