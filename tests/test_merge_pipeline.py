@@ -541,7 +541,6 @@ def test_same_seed_gives_the_same_result(
         ("min_overlap_area", -3.0),
         ("small_overlap_area", -1.0),
         ("small_overlap_max_psi", 0.0),
-        ("min_acceptance_index", 1.5),
         ("max_conflict_fraction", -0.01),
         ("ambiguity_ratio", 2.0),
         ("conflict_weight", -1.0),

@@ -98,8 +98,9 @@ class JointRefineConfig:
     """A pair is aligned only when its maps overlap on at least this much (m²) under the
     refined transform (the merge's own ``min_overlap_area``)."""
     min_acceptance_index: float = 0.9
-    """... and agree on at least this fraction of the overlapping cells (the merge's
-    ``min_acceptance_index``)."""
+    """... and agree on at least this fraction of the overlapping cells (the acceptance
+    index; the merge's own decision no longer uses it, but a pose-graph edge between two
+    maps already merged must fit this well)."""
     max_shift: float = 0.3
     """An alignment that moves the pair's relation further than this at the pivot (m) is
     not an edge: it has left the estimate for another fit (the rendezvous tolerance)."""

@@ -187,11 +187,10 @@ class MergeConfig:
     proposed it (:func:`~mrslam_env.merge.decide.rule_covers_enough`): a chance fit of a
     small piece of a repetitive building (a maze corridor, the next shelf aisle) agrees
     almost everywhere on the little it covers."""
-    min_acceptance_index: float = 0.9
-    """A confident merge agrees on at least this fraction of the cells known in both."""
     max_conflict_fraction: float = 0.01
-    """... and has at most this fraction of conflicts (a wall of one map on open floor of
-    the other, beyond a two-cell tolerance)."""
+    """A confident candidate has at most this fraction of conflicts (a wall of one map on
+    open floor of the other, beyond a two-cell tolerance, so that thick or doubled walls
+    are not counted) ..."""
     min_overlap_area: float = 3.0
     """... and overlaps on at least this many m²."""
     small_overlap_area: float = 8.0
@@ -245,7 +244,6 @@ class MergeConfig:
     def __post_init__(self) -> None:
         name = type(self).__name__
         fractions = (
-            "min_acceptance_index",
             "max_conflict_fraction",
             "ambiguity_ratio",
             "contradicted_rival_ratio",
