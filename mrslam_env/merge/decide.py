@@ -303,8 +303,9 @@ def unsettled_rival(
     Chosen on the merge benchmark's seed-0 set (an aliased warehouse pair the cheap pass
     merged wrongly without it) and checked on seed 1 and the real-building set; not
     confirmed: on the held-out seed-3 set the cheap pass merged a mirrored wing whose true
-    placement it never saw, which no rule over its own candidates can catch
-    (docs/decisions.md, "The cascade").
+    placement it never saw. With ``MergeConfig.cascade_rivals`` the cheap pass judges the
+    correlation's best distinct answers and refuses that pair; the cascade stays off for
+    a chance fit on seed 4 (docs/decisions.md, "The cascade's rival search").
     """
     best = scored[0]
     for other in scored[1:]:
