@@ -99,12 +99,13 @@ class ExplorerConfig:
     (:attr:`ExplorerPolicy.shared_target_radius`); with ``team_discount="distance"``,
     frontiers closer than this to a teammate's target have their gain scaled by
     ``distance / separation``, m (> 0)."""
-    team_discount: TeamDiscount = "overlap"
-    """How a teammate's target lowers the gain of a frontier (Burgard et al. 2005's utility
-    reduction; :func:`team_discount`): ``"overlap"`` scales the gain by the share of the
-    frontier's view the target's view does not cover (both views the square of
-    half-width ``frontiers.sensor_range`` the gain is counted in; no overlap across a
-    mapped wall); ``"distance"``: by ``min(1, distance / separation)``."""
+    team_discount: TeamDiscount = "distance"
+    """How a teammate's target lowers the gain of a frontier: ``"distance"`` scales it by
+    ``min(1, distance / separation)``; ``"overlap"`` (Burgard et al. 2005's utility
+    reduction, :func:`team_discount`; measured no better, docs/decisions.md) by the
+    share of the frontier's view the target's view does not cover (both views the
+    square of half-width ``frontiers.sensor_range`` the gain is counted in; no overlap
+    across a mapped wall)."""
     replan_interval: int = 25
     """Steps between routine replans."""
     min_replan_interval: int = 5
