@@ -64,14 +64,17 @@ __all__ = [
     "assign_frontiers",
     "frontier_policy",
     "frontier_utility",
+    "team_discount",
     "team_frontier_goals",
 ]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
+TeamDiscount = Literal["overlap", "distance"]
+
 ExplorerStatus = Literal[
-    "idle", "exploring", "to_goal", "arrived", "goal_unreachable", "blocked", "done"
+    "idle", "exploring", "waiting", "to_goal", "arrived", "goal_unreachable", "blocked", "done"
 ]
 
 
@@ -92,8 +95,17 @@ class ExplorerConfig:
     current target's cells), so that the choice does not flip between two similar
     frontiers on every replan (>= 0)."""
     separation: float = 4.0
-    """Frontiers closer than this to a teammate's target have their gain scaled by
+    """Frontier goals within a quarter of this of a teammate's target are the teammate's
+    (:attr:`ExplorerPolicy.shared_target_radius`); with ``team_discount="distance"``,
+    frontiers closer than this to a teammate's target have their gain scaled by
     ``distance / separation``, m (> 0)."""
+    team_discount: TeamDiscount = "distance"
+    """How a teammate's target lowers the gain of a frontier: ``"distance"`` scales it by
+    ``min(1, distance / separation)``; ``"overlap"`` (Burgard et al. 2005's utility
+    reduction, :func:`team_discount`; measured no better, docs/decisions.md) by the
+    share of the frontier's view the target's view does not cover (both views the
+    square of half-width ``frontiers.sensor_range`` the gain is counted in; no overlap
+    across a mapped wall)."""
     replan_interval: int = 25
     """Steps between routine replans."""
     min_replan_interval: int = 5
@@ -135,6 +147,9 @@ class ExplorerConfig:
         fraction = self.target_gone_fraction
         ok = 0 <= fraction <= 1
         require(type(self).__name__, "target_gone_fraction", fraction, ok, "in [0, 1]")
+        discount = self.team_discount
+        ok = discount in ("overlap", "distance")
+        require(type(self).__name__, "team_discount", discount, ok, "'overlap' or 'distance'")
 
     @classmethod
     def for_env(cls, env: EnvConfig, **overrides: Any) -> ExplorerConfig:
@@ -193,6 +208,74 @@ def _separation_discount(goals: FloatArray, taken: ArrayLike, separation: float)
     return np.minimum(distance / separation, 1.0)
 
 
+def team_discount(
+    goals: ArrayLike,
+    taken: ArrayLike,
+    view_range: float,
+    grid: GridMap | None = None,
+) -> FloatArray:
+    """Per frontier goal, the share of its information gain left to a robot once
+    teammates head for ``taken``: the utility reduction of Burgard et al. (IEEE T-RO 2005)
+    by the expected overlap of what the robots will see.
+
+    A robot at a goal sees what the gain counts: the square of half-width ``view_range``
+    around it. Two such squares whose centres are ``(dx, dy)`` apart share the fraction
+    ``max(0, 1 - |dx| / 2r) * max(0, 1 - |dy| / 2r)`` of one (r = ``view_range``); the
+    share left is one minus that, and against several taken targets the shares left
+    multiply. With ``grid``, a target hidden from the goal by a mapped wall (an OCCUPIED
+    cell on the segment between them) shares none of its view.
+
+    Parameters
+    ----------
+    goals : array_like, shape (F, 2)
+        Frontier goals, m.
+    taken : array_like, shape (K, 2)
+        Teammates' targets in the same frame, m.
+    view_range : float
+        Half-width of the viewed square, m (> 0).
+    grid : GridMap, optional
+        The map the goals are in, for the walls.
+
+    Returns
+    -------
+    ndarray of float64, shape (F,)
+        In [0, 1]; 1 where no target shares the view.
+    """
+    goals = np.asarray(goals, dtype=np.float64).reshape(-1, 2)
+    taken = np.asarray(taken, dtype=np.float64).reshape(-1, 2)
+    if not view_range > 0:
+        raise ValueError(f"view_range must be > 0 m, got {view_range!r}")
+    if len(taken) == 0 or len(goals) == 0:
+        return np.ones(len(goals))
+    offsets = np.abs(goals[:, None, :] - taken[None, :, :])  # (F, K, 2)
+    overlap = np.clip(1.0 - offsets / (2.0 * view_range), 0.0, 1.0).prod(axis=2)
+    if grid is not None:
+        hidden = _walls_between(grid.cells, grid.world_to_cell(goals), grid.world_to_cell(taken))
+        overlap[hidden] = 0.0
+    return np.asarray((1.0 - overlap).prod(axis=1), dtype=np.float64)
+
+
+@numba.njit(cache=True)
+def _walls_between(cells: NDArray[np.int8], starts: IntArray, ends: IntArray) -> NDArray[np.bool_]:
+    """(S, E) bool: whether an OCCUPIED cell lies on the segment from cell ``starts[i]`` to
+    cell ``ends[j]`` (sampled once per cell along its longer axis, ends excluded; cells
+    beyond the grid are no wall)."""
+    rows, cols = cells.shape
+    out = np.zeros((len(starts), len(ends)), dtype=np.bool_)
+    for i in range(len(starts)):
+        r0, c0 = starts[i, 0], starts[i, 1]
+        for j in range(len(ends)):
+            dr, dc = ends[j, 0] - r0, ends[j, 1] - c0
+            n = max(abs(dr), abs(dc))
+            for k in range(1, n):
+                r = r0 + (2 * k * dr + n) // (2 * n)  # k dr / n, rounded
+                c = c0 + (2 * k * dc + n) // (2 * n)
+                if 0 <= r < rows and 0 <= c < cols and cells[r, c] == OCCUPIED:
+                    out[i, j] = True
+                    break
+    return out
+
+
 def assign_frontiers(
     goals: ArrayLike,
     gains: ArrayLike,
@@ -201,14 +284,20 @@ def assign_frontiers(
     cost_weight: float = 2.0,
     separation: float = 4.0,
     min_gain: float = 0.0,
+    view_range: float | None = None,
+    grid: GridMap | None = None,
 ) -> IntArray:
-    """Split frontiers between robots greedily, keeping the robots apart.
+    """Split frontiers between robots greedily, keeping the robots apart (Burgard et
+    al., IEEE T-RO 2005).
 
     Repeatedly take the (robot, frontier) pair of highest utility
     (:func:`frontier_utility`) among the robots still without a frontier; then scale the
-    gain of every frontier by ``min(1, d / separation)``, d its distance to the taken
-    goal, so the next robot prefers places the first will not see. A robot may share a
-    frontier only when nothing else is worth its while.
+    gain of every frontier by the share of its view the taken goal's view does not cover
+    (:func:`team_discount` with ``view_range`` and ``grid``), or, without ``view_range``,
+    by ``min(1, d / separation)``, d its distance to the taken goal, so the next robot
+    prefers places the first will not see. A frontier is worth a trip while what is left
+    of its gain is at least ``min_gain`` (with ``min_gain = 0`` a robot may share a
+    frontier when nothing else is worth its while).
 
     Parameters
     ----------
@@ -224,6 +313,11 @@ def assign_frontiers(
         m (> 0).
     min_gain : float
         m².
+    view_range : float, optional
+        Half-width of a robot's view, m (> 0): the overlap discount instead of the
+        distance one.
+    grid : GridMap, optional
+        The map of ``goals``: no overlap across its walls.
 
     Returns
     -------
@@ -242,16 +336,18 @@ def assign_frontiers(
         raise ValueError(f"separation must be > 0 m, got {separation!r}")
     robots = costs.shape[0]
     assignment = np.full(robots, -1, dtype=np.int64)
-    worthwhile = gains_left >= min_gain
     for _ in range(robots):
-        utility = frontier_utility(gains_left, costs, cost_weight)
-        utility[:, ~worthwhile] = -np.inf
+        # Worth a trip on what is left of its gain once the taken goals' views are off.
+        utility = frontier_utility(gains_left, costs, cost_weight, min_gain=min_gain)
         utility[assignment >= 0] = -np.inf
         if not np.isfinite(utility).any():
             break
         robot, frontier = np.unravel_index(int(np.argmax(utility)), utility.shape)
         assignment[robot] = frontier
-        gains_left *= _separation_discount(goals, goals[frontier], separation)
+        if view_range is None:
+            gains_left *= _separation_discount(goals, goals[frontier], separation)
+        else:
+            gains_left *= team_discount(goals, goals[frontier], view_range, grid)
     return assignment
 
 
@@ -308,6 +404,8 @@ def team_frontier_goals(
         cost_weight=config.cost_weight,
         separation=config.separation,
         min_gain=config.min_gain,
+        view_range=config.frontiers.sensor_range if config.team_discount == "overlap" else None,
+        grid=grid,
     )
     goals = np.full((len(robots), 2), np.nan)
     assigned = assignment >= 0
@@ -362,7 +460,8 @@ class ExplorerPolicy:
     Attributes
     ----------
     status : str
-        ``"exploring"`` (driving to a frontier), ``"to_goal"`` / ``"arrived"`` /
+        ``"exploring"`` (driving to a frontier), ``"waiting"`` (the frontiers worth a
+        trip are left to teammates for now: not done), ``"to_goal"`` / ``"arrived"`` /
         ``"goal_unreachable"`` (a given goal), ``"blocked"`` (no passable cell near the
         robot), ``"done"`` (no frontier worth visiting is left), ``"idle"`` (before the
         first step).
@@ -555,7 +654,7 @@ class ExplorerPolicy:
         reason = self._replan_reason(robot_map, pose)
         if reason:
             self._replan(self._with_close_returns(robot_map), pose, reason)
-        if self.status in ("done", "blocked", "goal_unreachable", "idle"):
+        if self.status in ("done", "waiting", "blocked", "goal_unreachable", "idle"):
             self.follower.clear()
         scan = observation.get("scan")
         clearance = self._clearance(scan)
@@ -688,11 +787,11 @@ class ExplorerPolicy:
                 if self._given_goal is None:
                     self._blacklist_point(self._target)
                 return "no_progress"
-        if self.status in ("done", "blocked", "goal_unreachable"):
-            # Blocked: retry soon (the escape manoeuvre is moving the robot out).
-            wait = (
-                config.min_replan_interval if self.status == "blocked" else config.replan_interval
-            )
+        if self.status in ("done", "waiting", "blocked", "goal_unreachable"):
+            # Blocked: retry soon (the escape manoeuvre is moving the robot out); waiting:
+            # soon too (a teammate's target may be given up on any step).
+            soon = self.status in ("blocked", "waiting")
+            wait = config.min_replan_interval if soon else config.replan_interval
             return "retry" if since >= wait else ""
         if self._given_goal is not None:
             if self.status == "arrived":
@@ -835,7 +934,7 @@ class ExplorerPolicy:
         if len(frontiers):
             # The search stops once no frontier left can beat the best one reached: the
             # choice, its path cost and its path are those of the whole search.
-            gains, excluded, current = self._utility_parts(frontiers)
+            gains, excluded, current = self._utility_parts(frontiers, grid)
             bound = gains + config.tie_jitter
             if current >= 0:
                 bound[current] += config.target_bonus
@@ -850,10 +949,16 @@ class ExplorerPolicy:
             )
             choice = self._choose_frontier(frontiers, distances, (gains, excluded, current))
         if choice < 0:
-            self._empty_replans += 1
             self._target = None
             self._target_cells = np.empty((0, 2))
             self.follower.clear()
+            if len(frontiers) and self._left_to_teammates(frontiers, gains, excluded):
+                # Not done: what is left is the teammates' for now, and may come back to
+                # this robot (a teammate that gives its target up, or is done).
+                self._empty_replans = 0
+                self.status = "waiting"
+                return
+            self._empty_replans += 1
             self.status = "done" if self._empty_replans >= config.done_after else "exploring"
             return
         self._empty_replans = 0
@@ -864,6 +969,27 @@ class ExplorerPolicy:
         self._follow(cost_grid, distances.path_to(frontiers.goal_cells[choice]), same_goal)
         self.status = "exploring"
 
+    def _left_to_teammates(
+        self, frontiers: Frontiers, gains: FloatArray, excluded: NDArray[np.bool_]
+    ) -> bool:
+        """Whether a frontier worth a trip on its own (gain >= ``min_gain``, not
+        blacklisted) was passed over only because of the teammates' targets: taken by one,
+        or discounted (:meth:`_utility_parts`' ``gains``) below ``min_gain``."""
+        if len(self._teammate_targets) == 0:
+            return False
+        worthwhile = (frontiers.gains >= self.config.min_gain) & ~self._blacklisted(frontiers)
+        passed_over = excluded | (gains < self.config.min_gain)
+        return bool((worthwhile & passed_over).any())
+
+    def _blacklisted(self, frontiers: Frontiers) -> NDArray[np.bool_]:
+        """Per frontier, whether its goal is within ``blacklist_radius`` of a blacklisted
+        point."""
+        if not self._blacklist:
+            return np.zeros(len(frontiers), dtype=bool)
+        points = np.array([(x, y) for x, y, _ in self._blacklist])
+        radius = self.config.blacklist_radius
+        return _separation_discount(frontiers.goals, points, radius) < 1.0
+
     def _current_frontier(self, frontiers: Frontiers) -> int:
         """The new frontier that continues the current target's frontier, or -1."""
         if self._target is None or len(self._target_cells) == 0 or len(frontiers) == 0:
@@ -871,22 +997,28 @@ class ExplorerPolicy:
         cells = world_to_cell(self._target_cells, self._grid_origin, self._grid_resolution)
         return _most_overlapping(frontiers.labels, cells)
 
-    def _utility_parts(self, frontiers: Frontiers) -> tuple[FloatArray, NDArray[np.bool_], int]:
+    def _utility_parts(
+        self, frontiers: Frontiers, grid: GridMap
+    ) -> tuple[FloatArray, NDArray[np.bool_], int]:
         """Per frontier, the path-cost-free parts of its utility: the gain after the
-        separation discount, whether it is excluded (a teammate's target, blacklisted),
-        and the index of the current target's frontier (-1 if none)."""
+        teammates' discount (``team_discount``), whether it is excluded (a teammate's
+        target, blacklisted), and the index of the current target's frontier (-1 if
+        none)."""
         config = self.config
-        gains = frontiers.gains * _separation_discount(
-            frontiers.goals, self._teammate_targets, config.separation
-        )
+        if config.team_discount == "overlap":
+            view_range = config.frontiers.sensor_range
+            discount = team_discount(frontiers.goals, self._teammate_targets, view_range, grid)
+        else:
+            discount = _separation_discount(
+                frontiers.goals, self._teammate_targets, config.separation
+            )
+        gains = frontiers.gains * discount
         excluded = np.zeros(len(frontiers), dtype=bool)
         if len(self._teammate_targets):
             # A teammate's own target is taken, however big its gain.
             radius = self.shared_target_radius
             excluded |= _separation_discount(frontiers.goals, self._teammate_targets, radius) < 1.0
-        if self._blacklist:
-            points = np.array([(x, y) for x, y, _ in self._blacklist])
-            excluded |= _separation_discount(frontiers.goals, points, config.blacklist_radius) < 1.0
+        excluded |= self._blacklisted(frontiers)
         return gains, excluded, self._current_frontier(frontiers)
 
     def _choose_frontier(

@@ -11,6 +11,7 @@ from agents.explorer import (
     ExplorerPolicy,
     assign_frontiers,
     frontier_utility,
+    team_discount,
     team_frontier_goals,
 )
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
@@ -38,6 +39,48 @@ def test_assignment_sends_two_robots_to_different_places() -> None:
     # Without the separation discount both would crowd the same corner.
     crowded = assign_frontiers(goals, gains, costs, cost_weight=1.0, separation=1e-9)
     assert set(crowded.tolist()) <= {0, 1}
+
+
+def test_team_discount_is_the_share_of_the_view_no_teammate_covers() -> None:
+    # Views are 8 m x 8 m squares (half-width 4 m): the share two of them have in common
+    # is (1 - |dx| / 8) (1 - |dy| / 8).
+    goals = np.array([[0.0, 0.0], [2.0, 2.0], [8.0, 0.0], [-6.0, 0.0]])
+    left = team_discount(goals, [[0.0, 0.0]], 4.0)
+    np.testing.assert_allclose(left, [0.0, 1 - 0.75 * 0.75, 1.0, 0.75], atol=1e-12)
+    # Against two targets the shares left multiply.
+    both = team_discount(goals, [[0.0, 0.0], [4.0, 0.0]], 4.0)
+    np.testing.assert_allclose(both[1], (1 - 0.75 * 0.75) * (1 - 0.75 * 0.75), atol=1e-12)
+    np.testing.assert_array_equal(team_discount(goals, np.empty((0, 2)), 4.0), np.ones(4))
+    with pytest.raises(ValueError, match="view_range"):
+        team_discount(goals, [[0.0, 0.0]], 0.0)
+
+
+def test_team_discount_sees_no_overlap_across_a_mapped_wall() -> None:
+    # Two goals 2 m apart on either side of a wall, two more with the same offset in the
+    # open: the wall hides the target, the open floor does not.
+    cells = np.full((100, 100), FREE, dtype=np.int8)
+    cells[:50, 50] = OCCUPIED  # a wall along x = 2.5 m for y < 2.5 m
+    grid = GridMap(cells=cells, resolution=RESOLUTION)
+    goals = np.array([[1.5, 1.0], [1.5, 4.0]])
+    targets = np.array([[3.5, 1.0], [3.5, 4.0]])
+    hidden = team_discount(goals[:1], targets[:1], 4.0, grid)
+    seen = team_discount(goals[1:], targets[1:], 4.0, grid)
+    np.testing.assert_allclose(hidden, [1.0])
+    np.testing.assert_allclose(seen, [0.25])  # 2 m apart: 1 - 0.75 of the view is left
+    np.testing.assert_allclose(team_discount(goals[:1], targets[:1], 4.0), [0.25])
+
+
+def test_a_frontier_the_taken_view_covers_is_no_longer_worth_a_trip() -> None:
+    # Both robots next to one frontier, a second one 5 m on (12 m of path round a wall):
+    # the first frontier's view is the first robot's; the second robot goes on instead of
+    # sharing it, unless any gain left, however small, is worth the trip.
+    goals = np.array([[0.0, 0.0], [5.0, 0.0]])
+    gains = np.array([6.0, 6.0])
+    costs = np.array([[0.5, 12.5], [0.6, 12.4]])
+    shared = assign_frontiers(goals, gains, costs, cost_weight=0.5, view_range=4.0)
+    assert shared.tolist() == [0, 0]  # min_gain 0: what is left, however little, counts
+    split = assign_frontiers(goals, gains, costs, cost_weight=0.5, view_range=4.0, min_gain=0.5)
+    assert split.tolist() == [0, 1]
 
 
 def test_assignment_marks_robots_with_nothing_reachable() -> None:
@@ -99,6 +142,36 @@ def test_teammate_targets_push_the_choice_elsewhere() -> None:
     policy.set_teammate_targets(np.array([[1.0, 2.5]]))  # teammate heads for the west door
     policy.act({"pose": np.array([3.5, 2.5, 0.0])}, grid)
     assert policy.target is not None and policy.target[0] > 6.0
+
+
+def test_a_robot_whose_frontiers_are_teammates_targets_waits_and_is_not_done() -> None:
+    # Regression: the only frontier left is the teammate's target. The robot used to
+    # count that as nothing left, report done after `done_after` replans, and with all
+    # robots done the run ended early. It now waits, and takes the frontier when the
+    # teammate gives it up.
+    grid = two_rooms()
+    grid.cells[40:60, 20] = OCCUPIED  # close the west doorway
+    east_door = np.array([7.0, 2.475])
+    pose = {"pose": np.array([3.5, 2.5, 0.0])}
+    policy = ExplorerPolicy(np.random.default_rng(0), ExplorerConfig(done_after=2))
+    policy.set_teammate_targets(east_door[None])
+    for _ in range(20):
+        action = policy.act(pose, grid)
+    assert policy.status == "waiting" and not policy.done
+    assert policy.target is None
+    np.testing.assert_array_equal(action, [0.0, 0.0])
+    policy.set_teammate_targets(np.empty((0, 2)))  # the teammate gave it up
+    for _ in range(policy.config.min_replan_interval):
+        policy.act(pose, grid)
+    assert policy.status == "exploring" and policy.target is not None
+    assert np.hypot(*(policy.target - east_door)) < 0.5
+    # A frontier left to a teammate but blacklisted here is no reason to wait.
+    blocked = ExplorerPolicy(np.random.default_rng(0), ExplorerConfig(done_after=2))
+    blocked.set_teammate_targets(east_door[None])
+    blocked._blacklist_point(east_door)
+    for _ in range(3 * blocked.config.replan_interval):
+        blocked.act(pose, grid)
+    assert blocked.done
 
 
 def test_a_given_goal_overrides_exploration_until_cleared() -> None:
