@@ -56,10 +56,6 @@ IntArray = NDArray[np.int64]
 
 UnknownPolicy = Literal["blocked", "costly"]
 
-# 8-connected neighbourhood (row step, column step), orthogonal moves first.
-_NEIGHBOUR_ROWS = np.array([1, -1, 0, 0, 1, 1, -1, -1], dtype=np.int64)
-_NEIGHBOUR_COLS = np.array([0, 0, 1, -1, 1, -1, 1, -1], dtype=np.int64)
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class PlannerConfig:
@@ -427,117 +423,132 @@ def _heap_pop(keys: FloatArray, items: IntArray, size: int) -> tuple[float, int,
     return top_key, top_item, size
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _relax_neighbours(
     cost: FloatArray,
     distance: FloatArray,
     parent: IntArray,
     done: NDArray[np.bool_],
-    row: int,
-    col: int,
-    key: float,
+    rows: int,
+    cols: int,
     item: int,
+    key: float,
     resolution: float,
     diagonal: float,
-    neighbour_rows: IntArray,
-    neighbour_cols: IntArray,
     keys: FloatArray,
     items: IntArray,
     size: int,
 ) -> tuple[FloatArray, IntArray, int]:
-    """One Dijkstra expansion of the settled cell ``(row, col)`` at path cost ``key``: each
-    of its 8 neighbours not yet settled (a diagonal step needs both cells it passes) gets
-    a shorter path through it, pushed on the heap; returns the heap."""
-    rows, cols = cost.shape
-    here = cost[row, col]
+    """One Dijkstra expansion of the settled cell ``item`` (flat index into the flat
+    ``cost``, ``distance``, ``parent`` and ``done`` of a ``rows`` x ``cols`` grid) at path
+    cost ``key``: each of its 8 neighbours not yet settled (a diagonal step needs both
+    cells it passes), orthogonal steps first (the order the searches' ties depend on), gets
+    a shorter path through it, pushed on the heap; returns the heap. Inlined into the
+    searches, like the heap helpers."""
+    row = item // cols
+    col = item - row * cols
+    here = cost[item]
     for k in range(8):
-        dr = neighbour_rows[k]
-        dc = neighbour_cols[k]
+        if k == 0:
+            dr, dc = 1, 0
+        elif k == 1:
+            dr, dc = -1, 0
+        elif k == 2:
+            dr, dc = 0, 1
+        elif k == 3:
+            dr, dc = 0, -1
+        elif k == 4:
+            dr, dc = 1, 1
+        elif k == 5:
+            dr, dc = 1, -1
+        elif k == 6:
+            dr, dc = -1, 1
+        else:
+            dr, dc = -1, -1
         r = row + dr
         c = col + dc
-        if r < 0 or r >= rows or c < 0 or c >= cols or done[r, c]:
+        if r < 0 or r >= rows or c < 0 or c >= cols:
             continue
-        there = cost[r, c]
+        other = item + dr * cols + dc
+        if done[other]:
+            continue
+        there = cost[other]
         if not math.isfinite(there):
             continue
         if k >= 4:
-            if not (math.isfinite(cost[row + dr, col]) and math.isfinite(cost[row, col + dc])):
+            if not (math.isfinite(cost[item + dr * cols]) and math.isfinite(cost[item + dc])):
                 continue
             length = diagonal
         else:
             length = resolution
         candidate = key + length * 0.5 * (here + there)
-        if candidate < distance[r, c]:
-            distance[r, c] = candidate
-            parent[r, c] = item
-            keys, items, size = _heap_push(keys, items, size, candidate, r * cols + c)
+        if candidate < distance[other]:
+            distance[other] = candidate
+            parent[other] = item
+            keys, items, size = _heap_push(keys, items, size, candidate, other)
     return keys, items, size
 
 
 @numba.njit(cache=True)
 def _dijkstra_kernel(
-    cost: FloatArray,
+    cost2d: FloatArray,
     start_row: int,
     start_col: int,
     goal_row: int,
     goal_col: int,
     resolution: float,
-    neighbour_rows: IntArray,
-    neighbour_cols: IntArray,
 ) -> tuple[FloatArray, IntArray]:
     """Dijkstra over the 8-connected grid with a binary heap and lazy deletion.
 
     Edge ``a -> b`` costs ``length * (cost[a] + cost[b]) / 2``; a diagonal step needs both
     orthogonal cells it passes between to be finite. ``goal_row < 0`` searches everything.
+    The grids are worked on flat (row-major indices, as the parents are given).
     """
-    rows, cols = cost.shape
-    distance = np.full((rows, cols), np.inf)
-    parent = np.full((rows, cols), -1, dtype=np.int64)
-    done = np.zeros((rows, cols), dtype=np.bool_)
+    rows, cols = cost2d.shape
+    cost = np.ascontiguousarray(cost2d).ravel()
+    distance = np.full(rows * cols, np.inf)
+    parent = np.full(rows * cols, -1, dtype=np.int64)
+    done = np.zeros(rows * cols, dtype=np.bool_)
     capacity = 1024
     keys = np.empty(capacity)
     items = np.empty(capacity, dtype=np.int64)
     size = 0
-    distance[start_row, start_col] = 0.0
-    keys, items, size = _heap_push(keys, items, size, 0.0, start_row * cols + start_col)
+    start = start_row * cols + start_col
+    goal = goal_row * cols + goal_col if goal_row >= 0 else -1
+    distance[start] = 0.0
+    keys, items, size = _heap_push(keys, items, size, 0.0, start)
     diagonal = resolution * math.sqrt(2.0)
     while size > 0:
         key, item, size = _heap_pop(keys, items, size)
-        row = item // cols
-        col = item - row * cols
-        if done[row, col]:
+        if done[item]:
             continue
-        done[row, col] = True
-        if row == goal_row and col == goal_col:
+        done[item] = True
+        if item == goal:
             break
         keys, items, size = _relax_neighbours(
             cost,
             distance,
             parent,
             done,
-            row,
-            col,
-            key,
+            rows,
+            cols,
             item,
+            key,
             resolution,
             diagonal,
-            neighbour_rows,
-            neighbour_cols,
             keys,
             items,
             size,
         )
-    return distance, parent
+    return distance.reshape(rows, cols), parent.reshape(rows, cols)
 
 
 @numba.njit(cache=True)
 def _best_goal_kernel(
-    cost: FloatArray,
+    cost2d: FloatArray,
     start_row: int,
     start_col: int,
     resolution: float,
-    neighbour_rows: IntArray,
-    neighbour_cols: IntArray,
     goal_items: IntArray,
     goal_values: FloatArray,
     cost_weight: float,
@@ -547,15 +558,16 @@ def _best_goal_kernel(
     """:func:`_dijkstra_kernel` (the same pushes and pops, in the same order) stopped as
     soon as no unsettled goal can score above the best settled one (see
     :func:`best_goal_field`)."""
-    rows, cols = cost.shape
-    distance = np.full((rows, cols), np.inf)
-    parent = np.full((rows, cols), -1, dtype=np.int64)
-    done = np.zeros((rows, cols), dtype=np.bool_)
-    is_goal = np.zeros((rows, cols), dtype=np.bool_)
+    rows, cols = cost2d.shape
+    cost = np.ascontiguousarray(cost2d).ravel()
+    distance = np.full(rows * cols, np.inf)
+    parent = np.full(rows * cols, -1, dtype=np.int64)
+    done = np.zeros(rows * cols, dtype=np.bool_)
+    is_goal = np.zeros(rows * cols, dtype=np.bool_)
     goal_count = len(goal_items)
     settled = np.zeros(goal_count, dtype=np.bool_)
     for g in range(goal_count):
-        is_goal[goal_items[g] // cols, goal_items[g] % cols] = True
+        is_goal[goal_items[g]] = True
     best = -np.inf
     open_value = -np.inf  # the highest value of an unsettled goal
     for g in range(goal_count):
@@ -564,17 +576,16 @@ def _best_goal_kernel(
     keys = np.empty(capacity)
     items = np.empty(capacity, dtype=np.int64)
     size = 0
-    distance[start_row, start_col] = 0.0
-    keys, items, size = _heap_push(keys, items, size, 0.0, start_row * cols + start_col)
+    start = start_row * cols + start_col
+    distance[start] = 0.0
+    keys, items, size = _heap_push(keys, items, size, 0.0, start)
     diagonal = resolution * math.sqrt(2.0)
     while size > 0:
         key, item, size = _heap_pop(keys, items, size)
-        row = item // cols
-        col = item - row * cols
-        if done[row, col]:
+        if done[item]:
             continue
-        done[row, col] = True
-        if is_goal[row, col]:
+        done[item] = True
+        if is_goal[item]:
             open_value = -np.inf
             for g in range(goal_count):
                 if goal_items[g] == item:
@@ -591,19 +602,17 @@ def _best_goal_kernel(
             distance,
             parent,
             done,
-            row,
-            col,
-            key,
+            rows,
+            cols,
             item,
+            key,
             resolution,
             diagonal,
-            neighbour_rows,
-            neighbour_cols,
             keys,
             items,
             size,
         )
-    return distance, parent
+    return distance.reshape(rows, cols), parent.reshape(rows, cols)
 
 
 @numba.njit(cache=True)
@@ -666,9 +675,7 @@ def distance_field(
         If no passable cell lies within ``snap_distance`` of the start.
     """
     row, col = _start_cell(grid, start, snap_distance)
-    cost, parent = _dijkstra_kernel(
-        grid.cost, row, col, -1, -1, grid.resolution, _NEIGHBOUR_ROWS, _NEIGHBOUR_COLS
-    )
+    cost, parent = _dijkstra_kernel(grid.cost, row, col, -1, -1, grid.resolution)
     return DistanceField(cost=cost, parent=parent, start=(row, col), grid=grid)
 
 
@@ -743,17 +750,13 @@ def best_goal_field(
     row, col = int(start_cell[0]), int(start_cell[1])
     weight = float(cost_weight)
     if weight <= 0:  # no bound from the path cost: the whole search
-        cost, parent = _dijkstra_kernel(
-            grid.cost, row, col, -1, -1, grid.resolution, _NEIGHBOUR_ROWS, _NEIGHBOUR_COLS
-        )
+        cost, parent = _dijkstra_kernel(grid.cost, row, col, -1, -1, grid.resolution)
         return DistanceField(cost=cost, parent=parent, start=(row, col), grid=grid)
     cost, parent = _best_goal_kernel(
         grid.cost,
         row,
         col,
         grid.resolution,
-        _NEIGHBOUR_ROWS,
-        _NEIGHBOUR_COLS,
         items,
         values,
         weight,
@@ -844,16 +847,7 @@ def plan_path(
     goal_cell = nearest_passable_cell(grid, goal, snap_distance)
     if goal_cell is None:
         return np.empty((0, 2))
-    _, parent = _dijkstra_kernel(
-        grid.cost,
-        row,
-        col,
-        goal_cell[0],
-        goal_cell[1],
-        grid.resolution,
-        _NEIGHBOUR_ROWS,
-        _NEIGHBOUR_COLS,
-    )
+    _, parent = _dijkstra_kernel(grid.cost, row, col, goal_cell[0], goal_cell[1], grid.resolution)
     cells = trace_path(parent, np.array(goal_cell), (row, col))
     if len(cells) == 0:
         return np.empty((0, 2))
