@@ -219,24 +219,25 @@ def inflate(grid: GridMap, config: PlannerConfig | None = None) -> CostGrid:
     # ``band``) all lie inside it grown by ``band``: a SLAM grid grows in chunks and is
     # mostly unknown margin, where the cost is that of an unknown cell far from walls.
     rows, cols = known_window(grid, math.ceil(band / grid.resolution) + 1)
-    cells = grid.cells[rows, cols]
-    occupied = cells == OCCUPIED
     far_unknown = np.inf if config.unknown == "blocked" else config.unknown_cost
-    cost = np.full(grid.shape, far_unknown)
-    if occupied.any():
-        wall_distance = np.full(grid.shape, band)
-        near, near_cost = _window_costs(
-            cells,
-            _squared_distance_to(occupied),
-            grid.resolution,
-            config.blocked_radius,
-            config.clearance if config.clearance_cost > 0 else 0.0,
-            config.clearance_cost,
-            config.unknown == "blocked",
-            config.unknown_cost,
-        )
-        wall_distance[rows, cols] = near
-    else:
+    cost, wall_distance, has_wall = _inflated(
+        grid.cells,
+        rows.start,
+        rows.stop,
+        cols.start,
+        cols.stop,
+        grid.resolution,
+        config.blocked_radius,
+        config.clearance if config.clearance_cost > 0 else 0.0,
+        config.clearance_cost,
+        config.unknown == "blocked",
+        config.unknown_cost,
+        far_unknown,
+        band,
+    )
+    if not has_wall:
+        cells = grid.cells[rows, cols]
+        cost = np.full(grid.shape, far_unknown)
         wall_distance = np.full(grid.shape, np.inf)
         near_cost = np.ones(cells.shape)
         unknown = cells == UNKNOWN
@@ -244,64 +245,62 @@ def inflate(grid: GridMap, config: PlannerConfig | None = None) -> CostGrid:
             near_cost[unknown] = np.inf
         else:
             near_cost[unknown] *= config.unknown_cost
-    cost[rows, cols] = near_cost
+        cost[rows, cols] = near_cost
     return CostGrid(
         cost=cost, wall_distance=wall_distance, resolution=grid.resolution, origin=grid.origin
     )
 
 
 @numba.njit(cache=True)
-def _window_costs(
+def _inflated(
     cells: NDArray[np.int8],
-    squared: FloatArray,
+    r0: int,
+    r1: int,
+    c0: int,
+    c1: int,
     resolution: float,
     blocked_radius: float,
     clearance: float,
     clearance_cost: float,
     unknown_blocked: bool,
     unknown_cost: float,
-) -> tuple[FloatArray, FloatArray]:
-    """Wall distance (m) and cost of each cell of a window, from its squared distance to
-    the nearest wall (cells²), in one pass; ``clearance`` 0 turns the soft cost off."""
-    rows, cols = cells.shape
-    near = np.empty((rows, cols))
-    cost = np.empty((rows, cols))
-    for r in range(rows):
-        for c in range(cols):
-            distance = math.sqrt(squared[r, c]) * resolution
-            near[r, c] = distance
-            value = 1.0
-            if clearance > 0:
-                beyond = min(max((distance - blocked_radius) / clearance, 0.0), 1.0)
-                value = 1.0 + clearance_cost * ((1.0 - beyond) * (1.0 - beyond))
-            cell = cells[r, c]
-            if cell == OCCUPIED or distance < blocked_radius:
-                value = np.inf
-            if cell == UNKNOWN:
-                value = np.inf if unknown_blocked else value * unknown_cost
-            cost[r, c] = value
-    return near, cost
-
-
-@numba.njit(cache=True)
-def _squared_distance_to(features: NDArray[np.bool_]) -> FloatArray:
-    """Squared Euclidean distance (cells²) from each cell centre to the nearest
-    ``True`` cell's, exact (Meijster et al.'s two-pass algorithm in integers): the square of
-    ``ndimage.distance_transform_edt(~features)``, for a fraction of its time. Needs one
-    ``True`` cell at least."""
-    rows, cols = features.shape
+    far_unknown: float,
+    band: float,
+) -> tuple[FloatArray, FloatArray, bool]:
+    """The cost and the wall distance (m) of every cell of a map whose OCCUPIED cells all
+    lie in the window ``[r0, r1) x [c0, c1)``, in one pass, and whether there is one:
+    outside the window ``far_unknown`` and ``band``; inside, the exact Euclidean distance
+    to the nearest OCCUPIED cell centre (Meijster et al.'s two-pass algorithm in integers,
+    the square root of ``ndimage.distance_transform_edt`` over the window) and the cost
+    from it; ``clearance`` 0 turns the soft cost off."""
+    full_rows, full_cols = cells.shape
+    cost = np.empty((full_rows, full_cols))
+    near = np.empty((full_rows, full_cols))
+    for r in range(full_rows):
+        inside = r0 <= r < r1
+        for c in range(full_cols):
+            if not (inside and c0 <= c < c1):
+                cost[r, c] = far_unknown
+                near[r, c] = band
+    rows, cols = r1 - r0, c1 - c0
     far = rows + cols + 1
-    # Distance to the nearest feature in the same column (row by row, for the cache).
+    # Distance to the nearest wall in the same column (row by row, for the cache).
     column = np.empty((rows, cols), dtype=np.int64)
+    has_wall = False
     for c in range(cols):
-        column[0, c] = 0 if features[0, c] else far
+        wall = cells[r0, c0 + c] == OCCUPIED
+        has_wall |= wall
+        column[0, c] = 0 if wall else far
     for r in range(1, rows):
         for c in range(cols):
-            column[r, c] = 0 if features[r, c] else min(column[r - 1, c] + 1, far)
+            wall = cells[r0 + r, c0 + c] == OCCUPIED
+            has_wall |= wall
+            column[r, c] = 0 if wall else min(column[r - 1, c] + 1, far)
+    if not has_wall:
+        return cost, near, False
     for r in range(rows - 2, -1, -1):
         for c in range(cols):
             column[r, c] = min(column[r, c], column[r + 1, c] + 1)
-    squared = np.empty((rows, cols))
     sites = np.empty(cols, dtype=np.int64)
     starts = np.empty(cols, dtype=np.int64)
     for r in range(rows):
@@ -328,10 +327,21 @@ def _squared_distance_to(features: NDArray[np.bool_]) -> FloatArray:
                     starts[q] = w
         for u in range(cols - 1, -1, -1):
             i = sites[q]
-            squared[r, u] = float((u - i) ** 2 + g[i] ** 2)
+            distance = math.sqrt(float((u - i) ** 2 + g[i] ** 2)) * resolution
             if u == starts[q]:
                 q -= 1
-    return squared
+            value = 1.0
+            if clearance > 0:
+                beyond = min(max((distance - blocked_radius) / clearance, 0.0), 1.0)
+                value = 1.0 + clearance_cost * ((1.0 - beyond) * (1.0 - beyond))
+            cell = cells[r0 + r, c0 + u]
+            if cell == OCCUPIED or distance < blocked_radius:
+                value = np.inf
+            if cell == UNKNOWN:
+                value = np.inf if unknown_blocked else value * unknown_cost
+            near[r0 + r, c0 + u] = distance
+            cost[r0 + r, c0 + u] = value
+    return cost, near, True
 
 
 def nearest_passable_cell(
@@ -355,10 +365,9 @@ def nearest_passable_cell(
     tuple of int or None
         ``(row, col)``, or None when no passable cell lies within ``max_distance``.
     """
-    passable = grid.passable
     cell = grid.world_to_cell(np.asarray(point, dtype=np.float64)[:2])
     rows, cols = grid.shape
-    if grid.contains(cell) and passable[cell[0], cell[1]]:
+    if grid.contains(cell) and math.isfinite(grid.cost[cell[0], cell[1]]):
         return int(cell[0]), int(cell[1])
     radius = max_distance / grid.resolution if math.isfinite(max_distance) else rows + cols
     radius_cells = int(min(math.ceil(radius), rows + cols))
@@ -366,7 +375,7 @@ def nearest_passable_cell(
     c0, c1 = max(cell[1] - radius_cells, 0), min(cell[1] + radius_cells + 1, cols)
     if r0 >= r1 or c0 >= c1:
         return None
-    window = passable[r0:r1, c0:c1]
+    window = np.isfinite(grid.cost[r0:r1, c0:c1])  # the passable cells
     candidates = np.argwhere(window)
     if len(candidates) == 0:
         return None
