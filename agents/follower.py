@@ -29,6 +29,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Literal
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -195,28 +196,66 @@ def lookahead_target(
     position = np.asarray(position, dtype=np.float64)[:2]
     if len(path) == 1:
         return path[0].copy(), 0.0
-    segments = np.diff(path, axis=0)
-    lengths = np.hypot(segments[:, 0], segments[:, 1])
-    starts = np.concatenate(([0.0], np.cumsum(lengths)))
-    total = float(starts[-1])
-    # Projection of the robot on each segment, as an arc length.
-    safe = np.maximum(lengths, 1e-12)
-    t = np.clip(((position - path[:-1]) * segments).sum(axis=1) / safe**2, 0.0, 1.0)
-    projections = path[:-1] + t[:, None] * segments
-    distance = np.hypot(*(projections - position).T)
-    arc = starts[:-1] + t * lengths
-    window = (arc >= progress - 1e-9) & (arc <= progress + 2.0 * lookahead)
-    window |= (starts[1:] >= progress) & (starts[:-1] <= progress + 2.0 * lookahead)
-    if window.any():
-        candidates = np.flatnonzero(window)
-        best = candidates[np.argmin(distance[candidates])]
-        progress = max(progress, float(arc[best]))
+    # One compiled pass over the segments (paths are tens of waypoints: a dozen small
+    # numpy calls cost more than the arithmetic); the same operations in the same order.
+    target_x, target_y, progress = _lookahead_kernel(
+        np.ascontiguousarray(path, dtype=np.float64),
+        float(position[0]),
+        float(position[1]),
+        float(progress),
+        float(lookahead),
+    )
+    return np.array([target_x, target_y]), progress
+
+
+@numba.njit(cache=True)
+def _lookahead_kernel(
+    path: FloatArray, x: float, y: float, progress: float, lookahead: float
+) -> tuple[float, float, float]:
+    """:func:`lookahead_target` on a path of at least two waypoints: target ``(x, y)``
+    and progress."""
+    count = len(path) - 1
+    lengths = np.empty(count)
+    starts = np.empty(count + 1)
+    starts[0] = 0.0
+    for k in range(count):
+        lengths[k] = np.hypot(path[k + 1, 0] - path[k, 0], path[k + 1, 1] - path[k, 1])
+        starts[k + 1] = starts[k] + lengths[k]
+    total = starts[count]
+    # Projection of the robot on each segment, as an arc length; the nearest one inside
+    # the search window (the first on a tie) moves the progress on.
+    reach = progress + 2.0 * lookahead
+    best = -1
+    best_distance = np.inf
+    best_arc = 0.0
+    for k in range(count):
+        dx = path[k + 1, 0] - path[k, 0]
+        dy = path[k + 1, 1] - path[k, 1]
+        safe = max(lengths[k], 1e-12)
+        t = ((x - path[k, 0]) * dx + (y - path[k, 1]) * dy) / (safe * safe)
+        t = min(max(t, 0.0), 1.0)
+        arc = starts[k] + t * lengths[k]
+        inside = (arc >= progress - 1e-9) and (arc <= reach)
+        inside = inside or ((starts[k + 1] >= progress) and (starts[k] <= reach))
+        if not inside:
+            continue
+        distance = np.hypot(path[k, 0] + t * dx - x, path[k, 1] + t * dy - y)
+        if best < 0 or distance < best_distance:
+            best, best_distance, best_arc = k, distance, arc
+    if best >= 0:
+        progress = max(progress, best_arc)
     progress = min(progress, total)
     along = min(progress + lookahead, total)
-    segment = int(np.clip(np.searchsorted(starts, along, side="right") - 1, 0, len(lengths) - 1))
-    fraction = (along - starts[segment]) / max(lengths[segment], 1e-12)
-    target = path[segment] + min(fraction, 1.0) * segments[segment]
-    return target, progress
+    # The last segment starting at or before ``along`` (searchsorted, side "right").
+    segment = 0
+    for k in range(count + 1):
+        if starts[k] <= along:
+            segment = k
+    segment = min(max(segment, 0), count - 1)
+    fraction = min((along - starts[segment]) / max(lengths[segment], 1e-12), 1.0)
+    dx = path[segment + 1, 0] - path[segment, 0]
+    dy = path[segment + 1, 1] - path[segment, 1]
+    return path[segment, 0] + fraction * dx, path[segment, 1] + fraction * dy, progress
 
 
 def pursuit_command(

@@ -312,18 +312,13 @@ def cluster_frontiers(
         Number of frontiers.
     """
     config = config if config is not None else FrontierConfig()
-    components, count = ndimage.label(cells, structure=np.ones((3, 3), dtype=bool))
+    # Every component's cells at once, in row-major order within each component.
+    cell_rows, cell_cols, bounds, count = _components(np.asarray(cells, dtype=bool))
     labels = np.zeros(cells.shape, dtype=np.int32)
     if count == 0:
         return labels, 0
     min_cells = config.min_size / resolution
     max_cells = max(config.max_size / resolution, 1.0)
-    # Every component's cells at once, in row-major order within each component.
-    cell_rows, cell_cols = np.nonzero(components)
-    owner = components[cell_rows, cell_cols]
-    order = np.argsort(owner, kind="stable")
-    cell_rows, cell_cols, owner = cell_rows[order], cell_cols[order], owner[order]
-    bounds = np.searchsorted(owner, np.arange(1, count + 2))
     next_label = 1
     for index in range(count):
         begin, end = bounds[index], bounds[index + 1]
@@ -343,6 +338,57 @@ def cluster_frontiers(
         labels[rows, cols] = next_label + piece
         next_label += pieces
     return labels, next_label - 1
+
+
+@numba.njit(cache=True)
+def _components(cells: BoolArray) -> tuple[IntArray, IntArray, IntArray, int]:
+    """The 8-connected components of the True cells, numbered as ``ndimage.label`` numbers
+    them (in row-major order of their first cell), each one's cells in row-major order:
+    ``rows``, ``cols`` (all cells, component after component), ``bounds`` (C + 1 entries: the
+    cells of component ``k`` are ``[bounds[k], bounds[k + 1])``) and the count C. One
+    breadth-first fill per component over the (sparse) True cells, then one counting
+    pass."""
+    rows, cols = cells.shape
+    labels = np.zeros((rows, cols), dtype=np.int32)
+    total = 0
+    for r in range(rows):
+        for c in range(cols):
+            total += cells[r, c]
+    queue = np.empty(total, dtype=np.int64)
+    sizes = np.zeros(total + 1, dtype=np.int64)
+    count = 0
+    for r0 in range(rows):
+        for c0 in range(cols):
+            if not cells[r0, c0] or labels[r0, c0]:
+                continue
+            count += 1
+            labels[r0, c0] = count
+            queue[0] = r0 * cols + c0
+            head, tail = 0, 1
+            while head < tail:
+                r, c = divmod(queue[head], cols)
+                head += 1
+                for nr in range(max(r - 1, 0), min(r + 2, rows)):
+                    for nc in range(max(c - 1, 0), min(c + 2, cols)):
+                        if cells[nr, nc] and not labels[nr, nc]:
+                            labels[nr, nc] = count
+                            queue[tail] = nr * cols + nc
+                            tail += 1
+            sizes[count] = tail
+    bounds = np.zeros(count + 1, dtype=np.int64)
+    for k in range(count):
+        bounds[k + 1] = bounds[k] + sizes[k + 1]
+    fill = bounds.copy()
+    out_rows = np.empty(total, dtype=np.int64)
+    out_cols = np.empty(total, dtype=np.int64)
+    for r in range(rows):
+        for c in range(cols):
+            k = labels[r, c] - 1
+            if k >= 0:
+                out_rows[fill[k]] = r
+                out_cols[fill[k]] = c
+                fill[k] += 1
+    return out_rows, out_cols, bounds, count
 
 
 def known_integral_image(grid: GridMap) -> NDArray[np.int64]:

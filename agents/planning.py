@@ -56,10 +56,6 @@ IntArray = NDArray[np.int64]
 
 UnknownPolicy = Literal["blocked", "costly"]
 
-# 8-connected neighbourhood (row step, column step), orthogonal moves first.
-_NEIGHBOUR_ROWS = np.array([1, -1, 0, 0, 1, 1, -1, -1], dtype=np.int64)
-_NEIGHBOUR_COLS = np.array([0, 0, 1, -1, 1, -1, 1, -1], dtype=np.int64)
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class PlannerConfig:
@@ -223,24 +219,25 @@ def inflate(grid: GridMap, config: PlannerConfig | None = None) -> CostGrid:
     # ``band``) all lie inside it grown by ``band``: a SLAM grid grows in chunks and is
     # mostly unknown margin, where the cost is that of an unknown cell far from walls.
     rows, cols = known_window(grid, math.ceil(band / grid.resolution) + 1)
-    cells = grid.cells[rows, cols]
-    occupied = cells == OCCUPIED
     far_unknown = np.inf if config.unknown == "blocked" else config.unknown_cost
-    cost = np.full(grid.shape, far_unknown)
-    if occupied.any():
-        wall_distance = np.full(grid.shape, band)
-        near, near_cost = _window_costs(
-            cells,
-            _squared_distance_to(occupied),
-            grid.resolution,
-            config.blocked_radius,
-            config.clearance if config.clearance_cost > 0 else 0.0,
-            config.clearance_cost,
-            config.unknown == "blocked",
-            config.unknown_cost,
-        )
-        wall_distance[rows, cols] = near
-    else:
+    cost, wall_distance, has_wall = _inflated(
+        grid.cells,
+        rows.start,
+        rows.stop,
+        cols.start,
+        cols.stop,
+        grid.resolution,
+        config.blocked_radius,
+        config.clearance if config.clearance_cost > 0 else 0.0,
+        config.clearance_cost,
+        config.unknown == "blocked",
+        config.unknown_cost,
+        far_unknown,
+        band,
+    )
+    if not has_wall:
+        cells = grid.cells[rows, cols]
+        cost = np.full(grid.shape, far_unknown)
         wall_distance = np.full(grid.shape, np.inf)
         near_cost = np.ones(cells.shape)
         unknown = cells == UNKNOWN
@@ -248,64 +245,62 @@ def inflate(grid: GridMap, config: PlannerConfig | None = None) -> CostGrid:
             near_cost[unknown] = np.inf
         else:
             near_cost[unknown] *= config.unknown_cost
-    cost[rows, cols] = near_cost
+        cost[rows, cols] = near_cost
     return CostGrid(
         cost=cost, wall_distance=wall_distance, resolution=grid.resolution, origin=grid.origin
     )
 
 
 @numba.njit(cache=True)
-def _window_costs(
+def _inflated(
     cells: NDArray[np.int8],
-    squared: FloatArray,
+    r0: int,
+    r1: int,
+    c0: int,
+    c1: int,
     resolution: float,
     blocked_radius: float,
     clearance: float,
     clearance_cost: float,
     unknown_blocked: bool,
     unknown_cost: float,
-) -> tuple[FloatArray, FloatArray]:
-    """Wall distance (m) and cost of each cell of a window, from its squared distance to
-    the nearest wall (cells²), in one pass; ``clearance`` 0 turns the soft cost off."""
-    rows, cols = cells.shape
-    near = np.empty((rows, cols))
-    cost = np.empty((rows, cols))
-    for r in range(rows):
-        for c in range(cols):
-            distance = math.sqrt(squared[r, c]) * resolution
-            near[r, c] = distance
-            value = 1.0
-            if clearance > 0:
-                beyond = min(max((distance - blocked_radius) / clearance, 0.0), 1.0)
-                value = 1.0 + clearance_cost * ((1.0 - beyond) * (1.0 - beyond))
-            cell = cells[r, c]
-            if cell == OCCUPIED or distance < blocked_radius:
-                value = np.inf
-            if cell == UNKNOWN:
-                value = np.inf if unknown_blocked else value * unknown_cost
-            cost[r, c] = value
-    return near, cost
-
-
-@numba.njit(cache=True)
-def _squared_distance_to(features: NDArray[np.bool_]) -> FloatArray:
-    """Squared Euclidean distance (cells²) from each cell centre to the nearest
-    ``True`` cell's, exact (Meijster et al.'s two-pass algorithm in integers): the square of
-    ``ndimage.distance_transform_edt(~features)``, for a fraction of its time. Needs one
-    ``True`` cell at least."""
-    rows, cols = features.shape
+    far_unknown: float,
+    band: float,
+) -> tuple[FloatArray, FloatArray, bool]:
+    """The cost and the wall distance (m) of every cell of a map whose OCCUPIED cells all
+    lie in the window ``[r0, r1) x [c0, c1)``, in one pass, and whether there is one:
+    outside the window ``far_unknown`` and ``band``; inside, the exact Euclidean distance
+    to the nearest OCCUPIED cell centre (Meijster et al.'s two-pass algorithm in integers,
+    the square root of ``ndimage.distance_transform_edt`` over the window) and the cost
+    from it; ``clearance`` 0 turns the soft cost off."""
+    full_rows, full_cols = cells.shape
+    cost = np.empty((full_rows, full_cols))
+    near = np.empty((full_rows, full_cols))
+    for r in range(full_rows):
+        inside = r0 <= r < r1
+        for c in range(full_cols):
+            if not (inside and c0 <= c < c1):
+                cost[r, c] = far_unknown
+                near[r, c] = band
+    rows, cols = r1 - r0, c1 - c0
     far = rows + cols + 1
-    # Distance to the nearest feature in the same column (row by row, for the cache).
+    # Distance to the nearest wall in the same column (row by row, for the cache).
     column = np.empty((rows, cols), dtype=np.int64)
+    has_wall = False
     for c in range(cols):
-        column[0, c] = 0 if features[0, c] else far
+        wall = cells[r0, c0 + c] == OCCUPIED
+        has_wall |= wall
+        column[0, c] = 0 if wall else far
     for r in range(1, rows):
         for c in range(cols):
-            column[r, c] = 0 if features[r, c] else min(column[r - 1, c] + 1, far)
+            wall = cells[r0 + r, c0 + c] == OCCUPIED
+            has_wall |= wall
+            column[r, c] = 0 if wall else min(column[r - 1, c] + 1, far)
+    if not has_wall:
+        return cost, near, False
     for r in range(rows - 2, -1, -1):
         for c in range(cols):
             column[r, c] = min(column[r, c], column[r + 1, c] + 1)
-    squared = np.empty((rows, cols))
     sites = np.empty(cols, dtype=np.int64)
     starts = np.empty(cols, dtype=np.int64)
     for r in range(rows):
@@ -332,10 +327,21 @@ def _squared_distance_to(features: NDArray[np.bool_]) -> FloatArray:
                     starts[q] = w
         for u in range(cols - 1, -1, -1):
             i = sites[q]
-            squared[r, u] = float((u - i) ** 2 + g[i] ** 2)
+            distance = math.sqrt(float((u - i) ** 2 + g[i] ** 2)) * resolution
             if u == starts[q]:
                 q -= 1
-    return squared
+            value = 1.0
+            if clearance > 0:
+                beyond = min(max((distance - blocked_radius) / clearance, 0.0), 1.0)
+                value = 1.0 + clearance_cost * ((1.0 - beyond) * (1.0 - beyond))
+            cell = cells[r0 + r, c0 + u]
+            if cell == OCCUPIED or distance < blocked_radius:
+                value = np.inf
+            if cell == UNKNOWN:
+                value = np.inf if unknown_blocked else value * unknown_cost
+            near[r0 + r, c0 + u] = distance
+            cost[r0 + r, c0 + u] = value
+    return cost, near, True
 
 
 def nearest_passable_cell(
@@ -359,10 +365,9 @@ def nearest_passable_cell(
     tuple of int or None
         ``(row, col)``, or None when no passable cell lies within ``max_distance``.
     """
-    passable = grid.passable
     cell = grid.world_to_cell(np.asarray(point, dtype=np.float64)[:2])
     rows, cols = grid.shape
-    if grid.contains(cell) and passable[cell[0], cell[1]]:
+    if grid.contains(cell) and math.isfinite(grid.cost[cell[0], cell[1]]):
         return int(cell[0]), int(cell[1])
     radius = max_distance / grid.resolution if math.isfinite(max_distance) else rows + cols
     radius_cells = int(min(math.ceil(radius), rows + cols))
@@ -370,7 +375,7 @@ def nearest_passable_cell(
     c0, c1 = max(cell[1] - radius_cells, 0), min(cell[1] + radius_cells + 1, cols)
     if r0 >= r1 or c0 >= c1:
         return None
-    window = passable[r0:r1, c0:c1]
+    window = np.isfinite(grid.cost[r0:r1, c0:c1])  # the passable cells
     candidates = np.argwhere(window)
     if len(candidates) == 0:
         return None
@@ -427,117 +432,132 @@ def _heap_pop(keys: FloatArray, items: IntArray, size: int) -> tuple[float, int,
     return top_key, top_item, size
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _relax_neighbours(
     cost: FloatArray,
     distance: FloatArray,
     parent: IntArray,
     done: NDArray[np.bool_],
-    row: int,
-    col: int,
-    key: float,
+    rows: int,
+    cols: int,
     item: int,
+    key: float,
     resolution: float,
     diagonal: float,
-    neighbour_rows: IntArray,
-    neighbour_cols: IntArray,
     keys: FloatArray,
     items: IntArray,
     size: int,
 ) -> tuple[FloatArray, IntArray, int]:
-    """One Dijkstra expansion of the settled cell ``(row, col)`` at path cost ``key``: each
-    of its 8 neighbours not yet settled (a diagonal step needs both cells it passes) gets
-    a shorter path through it, pushed on the heap; returns the heap."""
-    rows, cols = cost.shape
-    here = cost[row, col]
+    """One Dijkstra expansion of the settled cell ``item`` (flat index into the flat
+    ``cost``, ``distance``, ``parent`` and ``done`` of a ``rows`` x ``cols`` grid) at path
+    cost ``key``: each of its 8 neighbours not yet settled (a diagonal step needs both
+    cells it passes), orthogonal steps first (the order the searches' ties depend on), gets
+    a shorter path through it, pushed on the heap; returns the heap. Inlined into the
+    searches, like the heap helpers."""
+    row = item // cols
+    col = item - row * cols
+    here = cost[item]
     for k in range(8):
-        dr = neighbour_rows[k]
-        dc = neighbour_cols[k]
+        if k == 0:
+            dr, dc = 1, 0
+        elif k == 1:
+            dr, dc = -1, 0
+        elif k == 2:
+            dr, dc = 0, 1
+        elif k == 3:
+            dr, dc = 0, -1
+        elif k == 4:
+            dr, dc = 1, 1
+        elif k == 5:
+            dr, dc = 1, -1
+        elif k == 6:
+            dr, dc = -1, 1
+        else:
+            dr, dc = -1, -1
         r = row + dr
         c = col + dc
-        if r < 0 or r >= rows or c < 0 or c >= cols or done[r, c]:
+        if r < 0 or r >= rows or c < 0 or c >= cols:
             continue
-        there = cost[r, c]
+        other = item + dr * cols + dc
+        if done[other]:
+            continue
+        there = cost[other]
         if not math.isfinite(there):
             continue
         if k >= 4:
-            if not (math.isfinite(cost[row + dr, col]) and math.isfinite(cost[row, col + dc])):
+            if not (math.isfinite(cost[item + dr * cols]) and math.isfinite(cost[item + dc])):
                 continue
             length = diagonal
         else:
             length = resolution
         candidate = key + length * 0.5 * (here + there)
-        if candidate < distance[r, c]:
-            distance[r, c] = candidate
-            parent[r, c] = item
-            keys, items, size = _heap_push(keys, items, size, candidate, r * cols + c)
+        if candidate < distance[other]:
+            distance[other] = candidate
+            parent[other] = item
+            keys, items, size = _heap_push(keys, items, size, candidate, other)
     return keys, items, size
 
 
 @numba.njit(cache=True)
 def _dijkstra_kernel(
-    cost: FloatArray,
+    cost2d: FloatArray,
     start_row: int,
     start_col: int,
     goal_row: int,
     goal_col: int,
     resolution: float,
-    neighbour_rows: IntArray,
-    neighbour_cols: IntArray,
 ) -> tuple[FloatArray, IntArray]:
     """Dijkstra over the 8-connected grid with a binary heap and lazy deletion.
 
     Edge ``a -> b`` costs ``length * (cost[a] + cost[b]) / 2``; a diagonal step needs both
     orthogonal cells it passes between to be finite. ``goal_row < 0`` searches everything.
+    The grids are worked on flat (row-major indices, as the parents are given).
     """
-    rows, cols = cost.shape
-    distance = np.full((rows, cols), np.inf)
-    parent = np.full((rows, cols), -1, dtype=np.int64)
-    done = np.zeros((rows, cols), dtype=np.bool_)
+    rows, cols = cost2d.shape
+    cost = np.ascontiguousarray(cost2d).ravel()
+    distance = np.full(rows * cols, np.inf)
+    parent = np.full(rows * cols, -1, dtype=np.int64)
+    done = np.zeros(rows * cols, dtype=np.bool_)
     capacity = 1024
     keys = np.empty(capacity)
     items = np.empty(capacity, dtype=np.int64)
     size = 0
-    distance[start_row, start_col] = 0.0
-    keys, items, size = _heap_push(keys, items, size, 0.0, start_row * cols + start_col)
+    start = start_row * cols + start_col
+    goal = goal_row * cols + goal_col if goal_row >= 0 else -1
+    distance[start] = 0.0
+    keys, items, size = _heap_push(keys, items, size, 0.0, start)
     diagonal = resolution * math.sqrt(2.0)
     while size > 0:
         key, item, size = _heap_pop(keys, items, size)
-        row = item // cols
-        col = item - row * cols
-        if done[row, col]:
+        if done[item]:
             continue
-        done[row, col] = True
-        if row == goal_row and col == goal_col:
+        done[item] = True
+        if item == goal:
             break
         keys, items, size = _relax_neighbours(
             cost,
             distance,
             parent,
             done,
-            row,
-            col,
-            key,
+            rows,
+            cols,
             item,
+            key,
             resolution,
             diagonal,
-            neighbour_rows,
-            neighbour_cols,
             keys,
             items,
             size,
         )
-    return distance, parent
+    return distance.reshape(rows, cols), parent.reshape(rows, cols)
 
 
 @numba.njit(cache=True)
 def _best_goal_kernel(
-    cost: FloatArray,
+    cost2d: FloatArray,
     start_row: int,
     start_col: int,
     resolution: float,
-    neighbour_rows: IntArray,
-    neighbour_cols: IntArray,
     goal_items: IntArray,
     goal_values: FloatArray,
     cost_weight: float,
@@ -547,15 +567,16 @@ def _best_goal_kernel(
     """:func:`_dijkstra_kernel` (the same pushes and pops, in the same order) stopped as
     soon as no unsettled goal can score above the best settled one (see
     :func:`best_goal_field`)."""
-    rows, cols = cost.shape
-    distance = np.full((rows, cols), np.inf)
-    parent = np.full((rows, cols), -1, dtype=np.int64)
-    done = np.zeros((rows, cols), dtype=np.bool_)
-    is_goal = np.zeros((rows, cols), dtype=np.bool_)
+    rows, cols = cost2d.shape
+    cost = np.ascontiguousarray(cost2d).ravel()
+    distance = np.full(rows * cols, np.inf)
+    parent = np.full(rows * cols, -1, dtype=np.int64)
+    done = np.zeros(rows * cols, dtype=np.bool_)
+    is_goal = np.zeros(rows * cols, dtype=np.bool_)
     goal_count = len(goal_items)
     settled = np.zeros(goal_count, dtype=np.bool_)
     for g in range(goal_count):
-        is_goal[goal_items[g] // cols, goal_items[g] % cols] = True
+        is_goal[goal_items[g]] = True
     best = -np.inf
     open_value = -np.inf  # the highest value of an unsettled goal
     for g in range(goal_count):
@@ -564,17 +585,16 @@ def _best_goal_kernel(
     keys = np.empty(capacity)
     items = np.empty(capacity, dtype=np.int64)
     size = 0
-    distance[start_row, start_col] = 0.0
-    keys, items, size = _heap_push(keys, items, size, 0.0, start_row * cols + start_col)
+    start = start_row * cols + start_col
+    distance[start] = 0.0
+    keys, items, size = _heap_push(keys, items, size, 0.0, start)
     diagonal = resolution * math.sqrt(2.0)
     while size > 0:
         key, item, size = _heap_pop(keys, items, size)
-        row = item // cols
-        col = item - row * cols
-        if done[row, col]:
+        if done[item]:
             continue
-        done[row, col] = True
-        if is_goal[row, col]:
+        done[item] = True
+        if is_goal[item]:
             open_value = -np.inf
             for g in range(goal_count):
                 if goal_items[g] == item:
@@ -591,19 +611,17 @@ def _best_goal_kernel(
             distance,
             parent,
             done,
-            row,
-            col,
-            key,
+            rows,
+            cols,
             item,
+            key,
             resolution,
             diagonal,
-            neighbour_rows,
-            neighbour_cols,
             keys,
             items,
             size,
         )
-    return distance, parent
+    return distance.reshape(rows, cols), parent.reshape(rows, cols)
 
 
 @numba.njit(cache=True)
@@ -666,9 +684,7 @@ def distance_field(
         If no passable cell lies within ``snap_distance`` of the start.
     """
     row, col = _start_cell(grid, start, snap_distance)
-    cost, parent = _dijkstra_kernel(
-        grid.cost, row, col, -1, -1, grid.resolution, _NEIGHBOUR_ROWS, _NEIGHBOUR_COLS
-    )
+    cost, parent = _dijkstra_kernel(grid.cost, row, col, -1, -1, grid.resolution)
     return DistanceField(cost=cost, parent=parent, start=(row, col), grid=grid)
 
 
@@ -743,17 +759,13 @@ def best_goal_field(
     row, col = int(start_cell[0]), int(start_cell[1])
     weight = float(cost_weight)
     if weight <= 0:  # no bound from the path cost: the whole search
-        cost, parent = _dijkstra_kernel(
-            grid.cost, row, col, -1, -1, grid.resolution, _NEIGHBOUR_ROWS, _NEIGHBOUR_COLS
-        )
+        cost, parent = _dijkstra_kernel(grid.cost, row, col, -1, -1, grid.resolution)
         return DistanceField(cost=cost, parent=parent, start=(row, col), grid=grid)
     cost, parent = _best_goal_kernel(
         grid.cost,
         row,
         col,
         grid.resolution,
-        _NEIGHBOUR_ROWS,
-        _NEIGHBOUR_COLS,
         items,
         values,
         weight,
@@ -844,16 +856,7 @@ def plan_path(
     goal_cell = nearest_passable_cell(grid, goal, snap_distance)
     if goal_cell is None:
         return np.empty((0, 2))
-    _, parent = _dijkstra_kernel(
-        grid.cost,
-        row,
-        col,
-        goal_cell[0],
-        goal_cell[1],
-        grid.resolution,
-        _NEIGHBOUR_ROWS,
-        _NEIGHBOUR_COLS,
-    )
+    _, parent = _dijkstra_kernel(grid.cost, row, col, goal_cell[0], goal_cell[1], grid.resolution)
     cells = trace_path(parent, np.array(goal_cell), (row, col))
     if len(cells) == 0:
         return np.empty((0, 2))

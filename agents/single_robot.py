@@ -125,6 +125,8 @@ class SingleRobotEnv(gymnasium.Env[Float32Array, Float32Array]):
         self.teammates = teammates
         self.render_mode = render_mode
         self.agent = self.multi.possible_agents[0]
+        # No scripted teammate reads its egocentric crop: the env skips it.
+        self.multi.omit_local_map(self.multi.possible_agents[1:])
         self.flattener = ObservationFlattener(self.multi.config, n_robots)
         self.observation_space = self.flattener.space
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)

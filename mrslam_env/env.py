@@ -134,6 +134,7 @@ import functools
 import os
 import sys
 import types
+from collections.abc import Iterable
 from dataclasses import replace
 from typing import Any, ClassVar
 
@@ -225,6 +226,26 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
                 f"(e.g. 'procedural'), got {scenario!r}"
             )
         self._dict_observations: dict[AgentID, ObsDict] = {}
+        self._unread_local_maps: frozenset[AgentID] = frozenset()
+
+    def omit_local_map(self, agents: Iterable[AgentID]) -> None:
+        """Leave ``local_map`` out of these robots' ``Dict`` observations from the next
+        :meth:`reset` or :meth:`step` on, for robots whose policy never reads it (a
+        scripted teammate of :class:`agents.single_robot.SingleRobotEnv`): the crop is a
+        good part of an observation's cost. Their observations then no longer match
+        :meth:`observation_space`; :meth:`state` and the flat observation still hold
+        their crops (computed when asked for), and every other entry is unchanged.
+
+        Raises
+        ------
+        ValueError
+            For an agent that is not one of ``possible_agents``.
+        """
+        agents = frozenset(agents)
+        unknown = agents - set(self.possible_agents)
+        if unknown:
+            raise ValueError(f"unknown agents {sorted(unknown)}; agents are {self.possible_agents}")
+        self._unread_local_maps = agents
 
     # --- spaces -------------------------------------------------------------------------
 
@@ -271,9 +292,13 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         whatever ``config.flat_observation`` is. No privileged data."""
         if self._sim is None:
             raise RuntimeError("state() called before reset()")
-        return np.concatenate(
-            [self._flattener(self._dict_observations[a]) for a in self.possible_agents]
-        )
+        parts = []
+        for i, agent in enumerate(self.possible_agents):
+            observation = self._dict_observations[agent]
+            if self._slams and "local_map" not in observation:  # omitted: the crop now
+                observation = dict(observation, local_map=self._local_map(i))
+            parts.append(self._flattener(observation))
+        return np.concatenate(parts)
 
     # --- the episode --------------------------------------------------------------------
 
@@ -520,7 +545,7 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         """Every live robot's observation; the ``Dict`` ones of all robots are kept for
         :meth:`state`."""
         observations: dict[AgentID, ObsDict] = {}
-        crop = self.config.local_map
+        flat = self.config.flat_observation
         for i, agent in enumerate(self.possible_agents):
             observation = {
                 "scan": state.scans[i].astype(np.float32),
@@ -529,17 +554,21 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
                 "comm": state.comm[i].astype(np.int8),
             }
             if self._slams:
-                slam = self._slams[i]
-                observation["pose"] = slam.pose
-                observation["local_map"] = local_map(
-                    slam.grid, slam.pose, crop.cells, crop.cell_size
-                )
+                observation["pose"] = self._slams[i].pose
+                if flat or agent not in self._unread_local_maps:
+                    observation["local_map"] = self._local_map(i)
             observations[agent] = observation
         self._dict_observations = observations
         live = [agent for agent in self.possible_agents if agent in self.agents]
         if self.config.flat_observation:
             return {agent: self._flattener(observations[agent]) for agent in live}
         return {agent: observations[agent] for agent in live}
+
+    def _local_map(self, i: int) -> NDArray[np.uint8]:
+        """Robot ``i``'s ``local_map`` observation: the crop of its SLAM map at its pose."""
+        slam = self._slams[i]
+        crop = self.config.local_map
+        return local_map(slam.grid, slam.pose, crop.cells, crop.cell_size)
 
     def _infos(self, state: SimState) -> dict[AgentID, dict[str, Any]]:
         cell_area = self._coverage_template.resolution**2

@@ -251,6 +251,48 @@ def test_lookahead_does_not_jump_to_a_later_part_of_a_path_that_doubles_back() -
     assert progress < 1.0
 
 
+def _numpy_lookahead_target(
+    path: np.ndarray, position: np.ndarray, progress: float, lookahead: float
+) -> tuple[np.ndarray, float]:
+    """The array version lookahead_target replaced (a reference for its compiled pass)."""
+    segments = np.diff(path, axis=0)
+    lengths = np.hypot(segments[:, 0], segments[:, 1])
+    starts = np.concatenate(([0.0], np.cumsum(lengths)))
+    total = float(starts[-1])
+    safe = np.maximum(lengths, 1e-12)
+    t = np.clip(((position - path[:-1]) * segments).sum(axis=1) / safe**2, 0.0, 1.0)
+    projections = path[:-1] + t[:, None] * segments
+    distance = np.hypot(*(projections - position).T)
+    arc = starts[:-1] + t * lengths
+    window = (arc >= progress - 1e-9) & (arc <= progress + 2.0 * lookahead)
+    window |= (starts[1:] >= progress) & (starts[:-1] <= progress + 2.0 * lookahead)
+    if window.any():
+        candidates = np.flatnonzero(window)
+        best = candidates[np.argmin(distance[candidates])]
+        progress = max(progress, float(arc[best]))
+    progress = min(progress, total)
+    along = min(progress + lookahead, total)
+    segment = int(np.clip(np.searchsorted(starts, along, side="right") - 1, 0, len(lengths) - 1))
+    fraction = (along - starts[segment]) / max(lengths[segment], 1e-12)
+    return path[segment] + min(fraction, 1.0) * segments[segment], progress
+
+
+def test_lookahead_target_equals_the_array_version_bit_for_bit() -> None:
+    rng = np.random.default_rng(7)
+    for trial in range(3000):
+        count = int(rng.integers(2, 40))
+        path = np.cumsum(rng.normal(0.0, 0.4, (count, 2)), axis=0)
+        if trial % 3 == 0:  # repeated waypoints: zero-length segments
+            path = np.repeat(path, rng.integers(1, 3, count), axis=0)
+        position = path[int(rng.integers(len(path)))] + rng.normal(0.0, 0.3, 2)
+        progress = float(rng.uniform(0.0, 3.0)) if trial % 2 else 0.0
+        lookahead = float(rng.uniform(0.1, 1.5))
+        target, moved = lookahead_target(path, position, progress, lookahead)
+        expected, expected_progress = _numpy_lookahead_target(path, position, progress, lookahead)
+        assert moved == expected_progress
+        assert np.array_equal(target, expected)
+
+
 def test_pursuit_command_goes_straight_turns_and_slows_near_the_goal() -> None:
     config = FollowerConfig()
     v, omega = pursuit_command([0.0, 0.0, 0.0], [1.0, 0.0], 5.0, config)

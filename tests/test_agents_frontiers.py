@@ -9,6 +9,7 @@ from scipy import ndimage
 from agents.frontiers import (
     FrontierConfig,
     _clear_specks,
+    _components,
     _dilated_inside,
     _nearest_feature_at,
     _open_square,
@@ -111,6 +112,22 @@ def test_speck_removal_matches_labelling_by_the_3x3_square() -> None:
         cleared = unknown.copy()
         _clear_specks(cleared, min_cells)
         assert np.array_equal(cleared, keep[labels])
+
+
+def test_components_are_scipys_labels_grouped_in_row_major_order() -> None:
+    rng = np.random.default_rng(8)
+    for trial in range(200):
+        shape = (int(rng.integers(1, 70)), int(rng.integers(1, 70)))
+        cells = rng.random(shape) < rng.uniform(0.02, 0.6)
+        if trial % 5 == 0:  # thin lines, as frontiers are
+            cells = cells & ~ndimage.binary_erosion(cells)
+        labels, count = ndimage.label(cells, structure=np.ones((3, 3), dtype=bool))
+        rows, cols, bounds, found = _components(cells)
+        assert found == count and len(bounds) == count + 1 and bounds[-1] == cells.sum()
+        for k in range(count):
+            own = np.argwhere(labels == k + 1)  # row-major
+            np.testing.assert_array_equal(rows[bounds[k] : bounds[k + 1]], own[:, 0])
+            np.testing.assert_array_equal(cols[bounds[k] : bounds[k + 1]], own[:, 1])
 
 
 def test_touched_counts_from_the_summed_area_table_match_the_cell_loop() -> None:

@@ -116,6 +116,38 @@ def test_wall_distances_are_scipy_euclidean_distances(seed: int) -> None:
 
 
 @pytest.mark.parametrize("seed", range(4))
+def test_costs_follow_the_scipy_distances_inside_unknown_margins(seed: int) -> None:
+    # A map inside a wide unknown margin (the cost grid works on its known window): every
+    # cell's cost from scipy's distances, under each unknown policy, with and without the
+    # soft band.
+    rng = np.random.default_rng(60 + seed)
+    inner = random_map(rng, 40 + 5 * seed, 60 - 4 * seed)
+    cells = np.full((inner.shape[0] + 70, inner.shape[1] + 50), UNKNOWN, dtype=np.int8)
+    cells[30 + seed : 30 + seed + inner.shape[0], 20 : 20 + inner.shape[1]] = inner.cells
+    grid = GridMap(cells=cells, resolution=RESOLUTION)
+    distance = ndimage.distance_transform_edt(cells != OCCUPIED) * RESOLUTION
+    for config in (
+        PlannerConfig(),
+        PlannerConfig(unknown="costly", unknown_cost=3.0),
+        PlannerConfig(clearance_cost=0.0, unknown="costly"),
+    ):
+        costs = inflate(grid, config)
+        band = config.blocked_radius + config.clearance
+        near = distance < band
+        np.testing.assert_array_equal(costs.wall_distance[near], distance[near])
+        assert np.all(costs.wall_distance[~near] >= band)
+        expected = np.ones(cells.shape)
+        if config.clearance_cost > 0:
+            beyond = np.clip((distance - config.blocked_radius) / config.clearance, 0.0, 1.0)
+            expected = 1.0 + config.clearance_cost * ((1.0 - beyond) * (1.0 - beyond))
+        expected[(cells == OCCUPIED) | (distance < config.blocked_radius)] = np.inf
+        unknown = cells == UNKNOWN
+        costly = expected[unknown] * config.unknown_cost
+        expected[unknown] = np.inf if config.unknown == "blocked" else costly
+        np.testing.assert_array_equal(costs.cost, expected)
+
+
+@pytest.mark.parametrize("seed", range(4))
 def test_reachable_cells_are_the_searched_ones(seed: int) -> None:
     rng = np.random.default_rng(50 + seed)
     grid = random_cost_grid(rng, 30, 40)

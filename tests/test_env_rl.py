@@ -70,6 +70,37 @@ def test_state_test() -> None:
     )
 
 
+@pytest.mark.parametrize("flat", [False, True])
+def test_omitted_local_maps_change_nothing_else(flat: bool) -> None:
+    import numpy as np
+
+    from mrslam_env.env import MultiRobotSlamEnv
+
+    config = replace(FAST, flat_observation=flat)
+    whole = MultiRobotSlamEnv(scenario=SCENARIO, n_robots=3, config=config)
+    lean = MultiRobotSlamEnv(scenario=SCENARIO, n_robots=3, config=config)
+    lean.omit_local_map(["robot_1", "robot_2"])
+    with pytest.raises(ValueError, match="unknown agents"):
+        lean.omit_local_map(["robot_9"])
+    first, _ = whole.reset(seed=4)
+    second, _ = lean.reset(seed=4)
+    rng = np.random.default_rng(0)
+    for step in range(25):
+        for agent in whole.possible_agents:
+            a, b = first[agent], second[agent]
+            if flat:  # the flat observation always holds the crop
+                assert np.array_equal(a, b)
+                continue
+            assert ("local_map" in b) == (agent == "robot_0")
+            assert a.keys() - b.keys() <= {"local_map"}
+            assert all(np.array_equal(a[key], b[key]) for key in b)
+        assert np.array_equal(whole.state(), lean.state())
+        actions = {agent: rng.uniform(-1, 1, 2) for agent in whole.possible_agents}
+        first, rewards, _, _, infos = whole.step(actions)
+        second, lean_rewards, _, _, lean_infos = lean.step(actions)
+        assert rewards == lean_rewards and repr(infos) == repr(lean_infos), step
+
+
 def test_max_cycles_test_on_the_package() -> None:
     max_cycles_test(mrslam_env)  # mod.parallel_env(max_cycles=4), mod.env(max_cycles=4)
 
