@@ -140,8 +140,8 @@ class TeamConfig:
     much as then."""
     max_rendezvous: int = 3
     """Hypotheses verified per attempt, best first. Only hypotheses the merge found
-    consistent with both maps (``ScoredHypothesis.confident``: acceptance index, no
-    conflicts, enough overlap) are worth the drive; several of them is exactly the
+    consistent with both maps (``ScoredHypothesis.confident``: enough overlap, few
+    conflicts, not refuted) are worth the drive; several of them is exactly the
     ambiguity (repeated rooms, mirrored wings) that only a rendezvous can settle."""
     max_meeting_cost: float = 25.0
     """Skip a hypothesis whose meeting point is further than this (m of weighted path)
@@ -612,7 +612,7 @@ class TeamCoordinator:
                 links[i, j] = links[j, i] = up
         self._links, self._reach = links, _reachable(links)
         self._observe_pair(observations)
-        if self.config.interaction and self.config.seek_contact_after:
+        if self.config.interaction:
             self._seek_contact()
         if self.config.interaction:
             if self.state in (TeamState.NO_INTERACTION, TeamState.COORDINATED_EXPLORATION):
@@ -647,6 +647,8 @@ class TeamCoordinator:
         the seeking."""
         config = self.config
         after = config.seek_contact_after
+        if not after:  # switched off
+            return
         for i in range(self.n_robots):
             outside = [j for j in range(self.n_robots) if self.roots[j] != self.roots[i]]
             if any(self._links[i, j] for j in outside):

@@ -342,7 +342,10 @@ def test_no_contact_seeking_once_merged_or_when_switched_off() -> None:
     with pytest.raises(ValueError, match="seek_contact_after"):
         TeamConfig(seek_contact_after=-1)
     off = TeamCoordinator(TeamConfig(seek_contact_after=0), rng=np.random.default_rng(0))
-    assert off.config.seek_contact_after == 0  # act() skips the rule altogether
+    _links_at(off, True, [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    for _ in range(50):
+        _links_at(off, False, [[5.0, 0.0, 0.0], [5.0, 0.0, 0.0]])
+    assert not any("seek contact" in d.text for d in off.pop_decisions())  # 0: never seeks
 
 
 def test_contact_seeking_goes_back_to_well_inside_the_range() -> None:

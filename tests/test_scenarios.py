@@ -26,7 +26,6 @@ from scenarios.worlds.catalog import SCENARIOS, Scenario
 from scenarios.worlds.procedural import (
     ProceduralConfig,
     build_procedural,
-    build_procedural_large,
     generate_floor_plan,
 )
 from scenarios.worlds.real import REAL_BUILDINGS
@@ -252,7 +251,6 @@ def test_procedural_has_at_least_five_rooms(seed: int) -> None:
 def test_procedural_large_is_larger_than_the_radio_range(seed: int) -> None:
     world = world_of("procedural_large", seed)
     assert world.name == f"procedural_large-{seed}"
-    assert np.array_equal(world.walls, build_procedural_large(seed).walls)
     xmin, ymin, xmax, ymax = world.bounds
     sides = sorted((xmax - xmin, ymax - ymin))
     assert 24.0 <= sides[0] <= 30.5 and 36.0 <= sides[1] <= 44.5, world.bounds

@@ -9,12 +9,11 @@ adds a few placements the virtual robot may have missed on a small overlap; the 
 are refined by the Birk & Carpin random walk
 (:func:`~mrslam_env.merge.refine.refine_random_walk`) and judged cell by cell
 (:func:`~mrslam_env.merge.dissimilarity.acceptance_index`). A hypothesis is
-*confident* when the maps agree where they overlap (acceptance index), no wall of one map
-crosses open floor of the other (conflicts), they overlap enough to say so (and a small
-overlap fits tightly), and no *different* transform explains the maps about as well
-(ambiguity: symmetric buildings, repeated rooms). Otherwise the answer is "no confident
-merge" with the reason, never a guess. The winner is refined again at the finer input
-resolution and the maps are fused.
+*confident* when no wall of one map crosses open floor of the other (conflicts), they
+overlap enough to say so (and a small overlap fits tightly), and no *different*
+transform explains the maps about as well (ambiguity: symmetric buildings, repeated
+rooms). Otherwise the answer is "no confident merge" with the reason, never a guess. The
+winner is refined again at the finer input resolution and the maps are fused.
 
 :func:`merge_maps` runs the stages in order: prepare, propose, score, decide (the rules,
 each a named pure function in :mod:`mrslam_env.merge.decide`), refine, fuse.
@@ -330,7 +329,7 @@ class ScoredHypothesis:
     score : float
         ``(agree - conflict_weight * conflicts) * cell area``, m².
     confident : bool
-        Passes the acceptance index, conflict and overlap tests (and is not refuted).
+        Passes the overlap-area and conflict-fraction tests (and is not refuted).
     conflict_length : float
         Length (m) of the largest unbroken group of conflicts
         (:func:`~mrslam_env.merge.dissimilarity.largest_conflict` x resolution); 0.0
@@ -854,11 +853,14 @@ def _cheap_pass(
     their walks and the decision when it accepts one; None otherwise (or when nothing was
     proposed)."""
     with _timed(seconds, "cascade.placements"):
-        # every local maximum: its first few are the default call's, the rest the rivals'
+        # every local maximum (for the rivals): its first max_hypotheses are the default
+        # call's, so the cheap pass proposes what the whole pipeline would
+        many = ALL_PLACEMENTS if config.cascade_rivals > 0 else config.correlation.max_hypotheses
         placements = correlation_hypotheses(
-            work.w1, work.w2, replace(config.correlation, max_hypotheses=ALL_PLACEMENTS)
+            work.w1, work.w2, replace(config.correlation, max_hypotheses=many)
         )
-    initials = _correlation_proposals(work, config, [], seconds, "cascade", placements)
+    default = placements[: config.correlation.max_hypotheses]
+    initials = _correlation_proposals(work, config, [], seconds, "cascade", default)
     if config.cascade_rivals > 0:
         with _timed(seconds, "cascade.rivals"):
             rivals = distinct_placements(placements, work.pivot, config, config.cascade_rivals)
