@@ -151,30 +151,43 @@ def _padded_unknown(grid: GridMap, min_unknown_area: float) -> BoolArray:
 
 
 @numba.njit(cache=True)
+def _fill8(
+    mask: BoolArray, labels: NDArray[np.int32], label: int, r0: int, c0: int, queue: IntArray
+) -> int:
+    """Breadth-first fill of the 8-connected True component of ``mask`` holding cell
+    ``(r0, c0)``: its unlabelled cells get ``label`` and their flat indices ``queue[:n]``,
+    in the order visited; returns ``n``."""
+    cols = mask.shape[1]
+    rows = mask.shape[0]
+    labels[r0, c0] = label
+    queue[0] = r0 * cols + c0
+    head, tail = 0, 1
+    while head < tail:
+        r, c = divmod(queue[head], cols)
+        head += 1
+        for nr in range(max(r - 1, 0), min(r + 2, rows)):
+            for nc in range(max(c - 1, 0), min(c + 2, cols)):
+                if mask[nr, nc] and not labels[nr, nc]:
+                    labels[nr, nc] = label
+                    queue[tail] = nr * cols + nc
+                    tail += 1
+    return tail
+
+
+@numba.njit(cache=True)
 def _clear_specks(unknown: BoolArray, min_cells: float) -> None:
     """Set False, in place, the 8-connected True components of ``unknown`` with fewer
     than ``min_cells`` cells, except the one holding cell (0, 0) (the outside ring):
     ``ndimage.label`` with the 3 x 3 square and a size test per label, by one
     breadth-first fill per component."""
     rows, cols = unknown.shape
-    seen = np.zeros((rows, cols), dtype=np.bool_)
+    seen = np.zeros((rows, cols), dtype=np.int32)
     queue = np.empty(rows * cols, dtype=np.int64)
     for r0 in range(rows):
         for c0 in range(cols):
             if not unknown[r0, c0] or seen[r0, c0]:
                 continue
-            seen[r0, c0] = True
-            queue[0] = r0 * cols + c0
-            head, tail = 0, 1
-            while head < tail:
-                r, c = divmod(queue[head], cols)
-                head += 1
-                for nr in range(max(r - 1, 0), min(r + 2, rows)):
-                    for nc in range(max(c - 1, 0), min(c + 2, cols)):
-                        if unknown[nr, nc] and not seen[nr, nc]:
-                            seen[nr, nc] = True
-                            queue[tail] = nr * cols + nc
-                            tail += 1
+            tail = _fill8(unknown, seen, 1, r0, c0, queue)
             if tail < min_cells and (r0 > 0 or c0 > 0):  # the outside is never a speck
                 for k in range(tail):
                     r, c = divmod(queue[k], cols)
@@ -362,19 +375,7 @@ def _components(cells: BoolArray) -> tuple[IntArray, IntArray, IntArray, int]:
             if not cells[r0, c0] or labels[r0, c0]:
                 continue
             count += 1
-            labels[r0, c0] = count
-            queue[0] = r0 * cols + c0
-            head, tail = 0, 1
-            while head < tail:
-                r, c = divmod(queue[head], cols)
-                head += 1
-                for nr in range(max(r - 1, 0), min(r + 2, rows)):
-                    for nc in range(max(c - 1, 0), min(c + 2, cols)):
-                        if cells[nr, nc] and not labels[nr, nc]:
-                            labels[nr, nc] = count
-                            queue[tail] = nr * cols + nc
-                            tail += 1
-            sizes[count] = tail
+            sizes[count] = _fill8(cells, labels, count, r0, c0, queue)
     bounds = np.zeros(count + 1, dtype=np.int64)
     for k in range(count):
         bounds[k + 1] = bounds[k] + sizes[k + 1]
