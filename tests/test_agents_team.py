@@ -3,6 +3,8 @@ a wrong one; without interaction nothing is merged."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -99,18 +101,27 @@ def test_bad_team_config_is_refused() -> None:
         TeamConfig(max_rendezvous=0)
 
 
+def _in_sight_team(
+    starts: tuple[tuple[float, float, float], ...],
+) -> tuple[MultiRobotSlamEnv, TeamCoordinator, MapCache, dict[str, Any]]:
+    """The office env from ``starts`` and a team that has seen the link and the poses
+    once, with no merge of its own (the tests inject the hypothesis)."""
+    env = MultiRobotSlamEnv(scenario="office", seed=0, config=EnvConfig(starts=starts))
+    observations, _ = env.reset()
+    maps = MapCache(env)
+    team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0))
+    team._retry_area = {(0, 1): np.inf}
+    team.act([observations[a] for a in env.possible_agents], maps)
+    return env, team, maps, observations
+
+
 def test_a_hypothesis_that_puts_the_robots_in_sight_is_settled_where_they_stand() -> None:
     # 3 m apart in the corridor, facing each other: the peer sensor already sees.
     starts = ((5.0, 8.0, 0.0), (8.0, 8.2, np.pi))
     truth = compose(inverse(np.array(starts[0])), np.array(starts[1]))
     for hypothesis, accepted in ((truth, True), (compose(truth, [0.0, 1.5, 0.0]), False)):
-        env = MultiRobotSlamEnv(scenario="office", seed=0, config=EnvConfig(starts=starts))
-        observations, _ = env.reset()
+        env, team, maps, observations = _in_sight_team(starts)
         agents = env.possible_agents
-        maps = MapCache(env)
-        team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0))
-        team._retry_area = {(0, 1): np.inf}  # no merge of its own: the hypothesis is injected
-        team.act([observations[a] for a in agents], maps)  # sees the link and the poses
         team.pop_decisions()
         team.hypotheses = [hypothesis]
         team._start_rendezvous(0, maps)
@@ -370,13 +381,8 @@ def test_contact_seeking_goes_back_to_well_inside_the_range() -> None:
 def test_a_match_where_they_stand_lost_from_sight_is_confirmed_at_a_meeting() -> None:
     starts = ((5.0, 8.0, 0.0), (8.0, 8.2, np.pi))
     truth = compose(inverse(np.array(starts[0])), np.array(starts[1]))
-    env = MultiRobotSlamEnv(scenario="office", seed=0, config=EnvConfig(starts=starts))
-    observations, _ = env.reset()
+    env, team, maps, observations = _in_sight_team(starts)
     agents = env.possible_agents
-    maps = MapCache(env)
-    team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0))
-    team._retry_area = {(0, 1): np.inf}  # no merge of its own: the hypothesis is injected
-    team.act([observations[a] for a in agents], maps)
     team.hypotheses = [truth]
     team._start_rendezvous(0, maps)
     assert team.rendezvous is not None and team.rendezvous.in_place
