@@ -115,13 +115,32 @@ def _in_sight_team(
     return env, team, maps, observations
 
 
+def _verify_on(
+    env: MultiRobotSlamEnv,
+    team: TeamCoordinator,
+    maps: MapCache,
+    observations: dict[str, Any],
+    steps: int,
+) -> list[str]:
+    """Step the env under the team until it leaves hypothesis verification (at most
+    ``steps``); the decisions it logged."""
+    agents = env.possible_agents
+    decisions = []
+    for _ in range(steps):
+        actions = team.act([observations[a] for a in agents], maps)
+        observations, *_ = env.step({a: actions[i] for i, a in enumerate(agents)})
+        decisions += [d.text for d in team.pop_decisions()]
+        if team.state is not TeamState.HYPOTHESIS_VERIFICATION:
+            break
+    return decisions
+
+
 def test_a_hypothesis_that_puts_the_robots_in_sight_is_settled_where_they_stand() -> None:
     # 3 m apart in the corridor, facing each other: the peer sensor already sees.
     starts = ((5.0, 8.0, 0.0), (8.0, 8.2, np.pi))
     truth = compose(inverse(np.array(starts[0])), np.array(starts[1]))
     for hypothesis, accepted in ((truth, True), (compose(truth, [0.0, 1.5, 0.0]), False)):
         env, team, maps, observations = _in_sight_team(starts)
-        agents = env.possible_agents
         team.pop_decisions()
         team.hypotheses = [hypothesis]
         team._start_rendezvous(0, maps)
@@ -133,12 +152,7 @@ def test_a_hypothesis_that_puts_the_robots_in_sight_is_settled_where_they_stand(
             assert team.state is TeamState.HYPOTHESIS_VERIFICATION, decisions
             assert team.rendezvous is not None and team.rendezvous.in_place
             assert not any(team._on_goal), decisions
-            for _ in range(200):
-                actions = team.act([observations[a] for a in agents], maps)
-                observations, *_ = env.step({a: actions[i] for i, a in enumerate(agents)})
-                decisions += [d.text for d in team.pop_decisions()]
-                if team.state is not TeamState.HYPOTHESIS_VERIFICATION:
-                    break
+            decisions += _verify_on(env, team, maps, observations, 200)
             assert team.state is TeamState.COORDINATED_EXPLORATION, decisions
             assert any("sightings while the robots moved" in d for d in decisions), decisions
             assert team.step_verified is not None and team.step_verified < 150
@@ -397,12 +411,8 @@ def test_a_match_where_they_stand_lost_from_sight_is_confirmed_at_a_meeting() ->
     assert any("both drive to meet" in d for d in decisions), decisions
     assert team.rendezvous is not None and not team.rendezvous.in_place
     assert all(team._on_goal)
-    for _ in range(300):  # the rendezvous as any other: seen at the meeting, accepted
-        actions = team.act([observations[a] for a in agents], maps)
-        observations, *_ = env.step({a: actions[i] for i, a in enumerate(agents)})
-        decisions += [d.text for d in team.pop_decisions()]
-        if team.state is not TeamState.HYPOTHESIS_VERIFICATION:
-            break
+    # The rendezvous as any other: seen at the meeting, accepted.
+    decisions += _verify_on(env, team, maps, observations, 300)
     assert team.state is TeamState.COORDINATED_EXPLORATION, decisions
     assert team.transform is not None
     error = compose(inverse(truth), team.transform)
