@@ -9,6 +9,7 @@ problem whose answer is ``map1_from_map2 = inverse(world_from_map1) ∘ world_fr
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -123,3 +124,18 @@ def in_frame(grid: GridMap, frame: np.ndarray, resolution: float | None = None) 
         resolution=res,
         origin=origin,
     )
+
+
+@functools.cache
+def corridor_maps() -> tuple[list[GridMap], list[np.ndarray]]:
+    """Three overlapping partial maps along the office corridor, each in its own frame
+    (its start, turned 0.3 rad more each), and the true ``map0_from_map_i``."""
+    world = build_world("office")
+    rng = np.random.default_rng(3)
+    centres = [(5.0, 4.0), (8.0, 4.0), (11.0, 4.0)]
+    world_from_maps = [np.array([c[0], c[1], 0.3 * k]) for k, c in enumerate(centres)]
+    own = [
+        scan_map(world, poses_near(world, c, 4.0, 12, rng), w)
+        for c, w in zip(centres, world_from_maps, strict=True)
+    ]
+    return own, [compose(inverse(world_from_maps[0]), w) for w in world_from_maps]

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 import pytest
-from merge_fixtures import poses_near, scan_map
+from merge_fixtures import corridor_maps
 
 from mrslam_env.geometry import compose, inverse, wrap_angle
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
@@ -25,7 +25,6 @@ from mrslam_env.merge.graph import (
     solve_pose_graph,
     wall_information,
 )
-from mrslam_env.registry import build_world
 
 TRUTH = np.array([[0.0, 0.0, 0.0], [4.0, 1.0, 0.5], [2.0, 5.0, -1.0], [-3.0, 4.0, 2.5]])
 
@@ -153,16 +152,8 @@ def test_config_is_checked() -> None:
 
 
 def test_three_office_maps_are_refined_jointly_closer_than_their_chain() -> None:
-    world = build_world("office")
-    rng = np.random.default_rng(3)
     # Three overlapping partial maps along the corridor, each in its own frame.
-    centres = [(5.0, 4.0), (8.0, 4.0), (11.0, 4.0)]
-    world_from_maps = [np.array([c[0], c[1], 0.3 * k]) for k, c in enumerate(centres)]
-    maps = [
-        scan_map(world, poses_near(world, c, 4.0, 12, rng), w)
-        for c, w in zip(centres, world_from_maps, strict=True)
-    ]
-    truth = [compose(inverse(world_from_maps[0]), w) for w in world_from_maps]
+    maps, truth = corridor_maps()
     # The chain: each join a little off, the errors adding up along it.
     step_off = np.array([0.08, -0.06, math.radians(1.0)])
     chained = [truth[0], compose(truth[1], step_off)]

@@ -5,14 +5,13 @@ one merged map and their frontiers; ``mrslam run --robots N`` and ``bench explor
 
 from __future__ import annotations
 
-import functools
 import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from merge_fixtures import poses_near, scan_map
+from merge_fixtures import corridor_maps
 
 from agents.team import (
     TeamConfig,
@@ -26,7 +25,6 @@ from mrslam_env.config import EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
 from mrslam_env.geometry import compose, inverse
 from mrslam_env.gridmap import FREE, GridMap
-from mrslam_env.registry import build_world
 from scenarios.bench.explore import format_explore_table, run_explore_benchmark
 from scenarios.cli import main
 from scenarios.experiment import MapCache, RunConfig
@@ -97,21 +95,6 @@ def test_transforms_compose_along_the_graph_and_robots_join_with_their_group() -
     assert np.allclose(team.policies[2].frames[-1], t02)  # type: ignore[attr-defined]
 
 
-@functools.cache
-def _corridor_maps() -> tuple[list[GridMap], list[np.ndarray]]:
-    """Three partial maps along the office corridor, each in its own frame (its start),
-    and the true ``map0_from_map_i``."""
-    world = build_world("office")
-    rng = np.random.default_rng(3)
-    centres = [(5.0, 4.0), (8.0, 4.0), (11.0, 4.0)]
-    world_from_maps = [np.array([c[0], c[1], 0.3 * k]) for k, c in enumerate(centres)]
-    own = [
-        scan_map(world, poses_near(world, c, 4.0, 12, rng), w)
-        for c, w in zip(centres, world_from_maps, strict=True)
-    ]
-    return own, [compose(inverse(world_from_maps[0]), w) for w in world_from_maps]
-
-
 def _team_of_three() -> TeamCoordinator:
     return TeamCoordinator(
         TeamConfig(),
@@ -122,7 +105,7 @@ def _team_of_three() -> TeamCoordinator:
 
 
 def test_a_join_outside_the_common_frame_leaves_robot_0_its_current_map() -> None:
-    own, truth = _corridor_maps()
+    own, truth = corridor_maps()
     team = _team_of_three()
     current = list(own)
     team._maps = lambda i: current[i]
@@ -140,7 +123,7 @@ def test_a_join_outside_the_common_frame_leaves_robot_0_its_current_map() -> Non
 
 
 def test_a_group_of_three_is_refined_jointly_not_chained() -> None:
-    own, truth = _corridor_maps()
+    own, truth = corridor_maps()
     team = _team_of_three()
     team._maps = lambda i: own[i]
     # Each join a little off (as refined against one map), the errors adding up.
