@@ -536,8 +536,9 @@ def _touched_in_squares(
                 if only and region != outside and touches[f, region]:
                     only = False
             only_outside[f] = only
-    table = np.zeros((rows + 1, cols + 1) if only_outside.any() else (1, 1), dtype=np.int64)
-    if only_outside.any():
+    use_table = only_outside.any()
+    table = np.zeros((rows + 1, cols + 1) if use_table else (1, 1), dtype=np.int64)
+    if use_table:
         for r in range(rows):
             run = 0
             for c in range(cols):
@@ -595,21 +596,20 @@ def _goal_cells(
     reachable: BoolArray,
     resolution: float,
     max_goal_offset: float,
-    offset: tuple[int, int] = (0, 0),
-    cells: IntArray | None = None,
+    offset: tuple[int, int],
+    cells: IntArray,
 ) -> tuple[IntArray, BoolArray]:
     """Per frontier: the reachable cell nearest to its cell closest to its centroid, among
     its cells within ``max_goal_offset`` of reachable space.
 
     A frontier with no such cell is invalid. ``labels`` and ``reachable`` may be a window of the map
     whose cell [0, 0] is the map's cell ``offset``; ``centroid_cells`` and the goal cells
-    returned are in the map's cells; ``cells``, if given, is ``np.argwhere(labels > 0)``.
+    returned are in the map's cells; ``cells`` is ``np.argwhere(labels > 0)``.
     """
     goal_cells = np.zeros((count, 2), dtype=np.int64)
     valid = np.zeros(count, dtype=bool)
     if count == 0 or not reachable.any():
         return goal_cells, valid
-    cells = np.argwhere(labels > 0) if cells is None else cells
     owner = labels[cells[:, 0], cells[:, 1]] - 1
     to_centroid = ((cells + np.asarray(offset) - centroid_cells[owner]) ** 2).sum(axis=1)
     # The nearest reachable cell at the frontier cells only (the transform scipy's

@@ -614,7 +614,6 @@ class TeamCoordinator:
         self._observe_pair(observations)
         if self.config.interaction:
             self._seek_contact()
-        if self.config.interaction:
             if self.state in (TeamState.NO_INTERACTION, TeamState.COORDINATED_EXPLORATION):
                 self._maybe_generate(observations, maps)
             if self.state is TeamState.HYPOTHESIS_VERIFICATION:
@@ -912,15 +911,13 @@ class TeamCoordinator:
                 )
             elif meeting is not None:
                 point0, cost = meeting
-                point1 = transform_points(inverse(hypothesis), point0[None, :])[0]
                 self.rendezvous = _Rendezvous(
                     hypothesis=hypothesis,
                     index=index,
                     meeting_point=point0,
                     started=self.step,
                 )
-                for side, goal in enumerate((point0, point1)):
-                    self._send(side, goal)
+                self._send_to_meet(hypothesis, point0)
                 self.state = TeamState.HYPOTHESIS_VERIFICATION
                 self.hypotheses_tested += 1
                 x, y, theta = hypothesis
@@ -1086,7 +1083,7 @@ class TeamCoordinator:
                 rendezvous, maps, f"robot_{stuck[0]} cannot reach the meeting point on its map"
             )
             return
-        arrived = all(self.explorers[r].status in ("arrived", "goal_unreachable") for r in robots)
+        arrived = all(self.explorers[r].status == "arrived" for r in robots)
         if arrived and rendezvous.arrived_at is None:
             rendezvous.arrived_at = self.step
             self._decide("both robots at the rendezvous; waiting for a sighting")
@@ -1098,6 +1095,13 @@ class TeamCoordinator:
         elif self.step - rendezvous.started >= config.timeout_steps:
             self._reject(rendezvous, maps, "rendezvous timed out")
 
+    def _send_to_meet(self, hypothesis: FloatArray, point0: FloatArray) -> None:
+        """Both sides of the pair to the meeting point ``point0`` (side 0's frame), side 1
+        to where ``hypothesis`` puts it in its own frame."""
+        point1 = transform_points(inverse(hypothesis), point0[None, :])[0]
+        for side, goal in enumerate((point0, point1)):
+            self._send(side, goal)
+
     def _drive_to_meet(self, rendezvous: _Rendezvous, maps: MapSource) -> bool:
         """A hypothesis matched where the robots stood, then they lost sight of each
         other before it was confirmed (exploring on, they part): both drive to its
@@ -1108,9 +1112,7 @@ class TeamCoordinator:
         if meeting is None or meeting[1] > self.config.max_meeting_cost:
             return False
         point0, cost = meeting
-        point1 = transform_points(inverse(hypothesis), point0[None, :])[0]
-        for side, goal in enumerate((point0, point1)):
-            self._send(side, goal)
+        self._send_to_meet(hypothesis, point0)
         rendezvous.in_place = False
         rendezvous.meeting_point = point0
         rendezvous.started = self.step

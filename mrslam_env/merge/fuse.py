@@ -24,7 +24,15 @@ from mrslam_env.geometry import transform_points
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap, resample_cells
 from mrslam_env.merge.dissimilarity import check_same_resolution, check_transform
 
-__all__ = ["covering_grid", "fuse_all", "fuse_cells", "fuse_maps", "resample_map", "warp_map"]
+__all__ = [
+    "at_resolution",
+    "covering_grid",
+    "fuse_all",
+    "fuse_cells",
+    "fuse_maps",
+    "resample_map",
+    "warp_map",
+]
 
 LATTICE_EPS = 1e-6
 """Tolerance, in cells, when snapping world bounds to a lattice (absorbs round-off so a
@@ -53,6 +61,14 @@ def _check_has_known(grid: GridMap, name: str) -> None:
     _check_not_empty(grid, name)
     if not (grid.free.any() or grid.occupied.any()):
         raise ValueError(f"{name} has no known (free or occupied) cell")
+
+
+def at_resolution(grid: GridMap, resolution: float) -> GridMap:
+    """``grid`` itself when its cells are already ``resolution`` m, else
+    :func:`resample_map` of it."""
+    if math.isclose(grid.resolution, resolution, rel_tol=1e-9):
+        return grid
+    return resample_map(grid, resolution)
 
 
 def resample_map(grid: GridMap, resolution: float) -> GridMap:
@@ -273,7 +289,5 @@ def fuse_all(base: GridMap, others: Iterable[tuple[GridMap, ArrayLike]]) -> Grid
     map's first (:func:`resample_map`)."""
     fused = base
     for other, transform in others:
-        if not math.isclose(other.resolution, fused.resolution):
-            other = resample_map(other, fused.resolution)
-        fused = fuse_maps(fused, other, transform)
+        fused = fuse_maps(fused, at_resolution(other, fused.resolution), transform)
     return fused

@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from mrslam_env.geometry import compose, inverse, transform_points, wrap_angle, wrap_scalar
 from mrslam_env.gridmap import GridMap
-from mrslam_env.merge.fuse import resample_map
+from mrslam_env.merge.fuse import at_resolution
 from mrslam_env.merge.pipeline import MergeConfig, refine_transform
 from mrslam_env.validation import check_fields
 
@@ -337,9 +337,7 @@ def pairwise_edges(
     if len(estimate) != len(maps):
         raise ValueError(f"{len(maps)} maps need as many transforms, got {len(estimate)}")
     resolution = min(m.resolution for m in maps)
-    grids = [
-        m if math.isclose(m.resolution, resolution) else resample_map(m, resolution) for m in maps
-    ]
+    grids = [at_resolution(m, resolution) for m in maps]
     edges = []
     for i in range(len(grids)):
         for j in range(i + 1, len(grids)):
@@ -419,8 +417,7 @@ def alignment_edge(
     a verified, refined join of two groups' maps): its trust from the walls the maps
     share there (:func:`wall_information`); None when they share none."""
     transform = np.asarray(mapi_from_mapj, dtype=np.float64)
-    if not math.isclose(mi.resolution, mj.resolution):
-        mj = resample_map(mj, mi.resolution)
+    mj = at_resolution(mj, mi.resolution)
     pivot = _overlap_pivot(mi, mj, transform)
     if pivot is None:
         return None

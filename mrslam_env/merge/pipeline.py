@@ -53,7 +53,7 @@ from mrslam_env.merge.dissimilarity import (
     distance_maps,
     largest_conflict,
 )
-from mrslam_env.merge.fuse import fuse_maps, resample_map
+from mrslam_env.merge.fuse import at_resolution, fuse_maps
 from mrslam_env.merge.hypotheses import (
     CorrelationConfig,
     Hypothesis,
@@ -503,12 +503,6 @@ def _working_resolution(m1: GridMap, m2: GridMap, config: MergeConfig) -> float:
         factor += 1
 
 
-def _at_resolution(grid: GridMap, resolution: float) -> GridMap:
-    if math.isclose(grid.resolution, resolution, rel_tol=1e-9):
-        return grid
-    return resample_map(grid, resolution)
-
-
 # --- aliasing check -------------------------------------------------------------------------
 
 
@@ -591,7 +585,7 @@ def _prepare(m1: GridMap, m2: GridMap, config: MergeConfig) -> _Working:
             f"(at most {config.max_resolution_ratio}x)"
         )
     resolution = _working_resolution(m1, m2, config)
-    w1, w2 = _at_resolution(m1, resolution), _at_resolution(m2, resolution)
+    w1, w2 = at_resolution(m1, resolution), at_resolution(m2, resolution)
     for name, working in (("map 1", w1), ("map 2", w2)):
         if not working.free.any():
             raise MergeInputError(
@@ -991,7 +985,7 @@ def merge_maps(
             known1, known2, work, decision.chosen, config, rng
         )
     with _timed(seconds, "fuse"):
-        fused = fuse_maps(known1, _at_resolution(known2, known1.resolution), transform)
+        fused = fuse_maps(known1, at_resolution(known2, known1.resolution), transform)
     seconds["total"] = time.perf_counter() - started
     fine = min(m1.resolution, m2.resolution)
     return MergeResult(
@@ -1028,7 +1022,7 @@ def refine_transform(
     config = config if config is not None else MergeConfig()
     m1, m2 = _known_parts(m1, m2, config)
     resolution = _working_resolution(m1, m2, config)
-    w1, w2 = _at_resolution(m1, resolution), _at_resolution(m2, resolution)
+    w1, w2 = at_resolution(m1, resolution), at_resolution(m2, resolution)
     walk = refine_random_walk(w1, w2, map1_from_map2, config=config.random_walk, rng=rng)
     return _refine_at_input_resolution(m1, m2, walk.transform, config, rng)
 
@@ -1042,7 +1036,7 @@ def _refine_at_input_resolution(
 ) -> tuple[FloatArray, float, Agreement]:
     """The last random walk, at the finer input resolution: transform, psi, agreement."""
     fine = min(m1.resolution, m2.resolution)
-    f1, f2 = _at_resolution(m1, fine), _at_resolution(m2, fine)
+    f1, f2 = at_resolution(m1, fine), at_resolution(m2, fine)
     sides = config.final_random_walk.dissimilarity.wall_sides
     d1, d2 = distance_maps(f1, sides=sides), distance_maps(f2, sides=sides)
     final = refine_random_walk(

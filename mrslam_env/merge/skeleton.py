@@ -463,9 +463,7 @@ def _trace_edges(
     seen = set()
     seen.add(np.int64(-1))
     span = np.int64(rows) * np.int64(cols)
-    ring = np.array(
-        [[1, 0], [1, 1], [0, 1], [-1, 1], [-1, 0], [-1, -1], [0, -1], [1, -1]], dtype=np.int64
-    )
+    ring = _RING
     loops = np.empty((0, 2), dtype=np.int64)
     n_loops = 0
     for phase in range(2):

@@ -884,6 +884,9 @@ def _mark_newly_known_at(
     candidates: NDArray[np.int64],
     flat_out: NDArray[np.int64],
 ) -> int:
+    """:func:`_mark_newly_known` over the flat indices ``candidates`` only: marks in
+    ``ever`` the known cells not yet in it, writes their flat indices to ``flat_out``
+    (first occurrence only) and returns their count."""
     cols = log_odds.shape[1]
     count = 0
     for index in candidates:
