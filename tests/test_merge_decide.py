@@ -34,9 +34,10 @@ from mrslam_env.merge.decide import (
     rule_has_candidates,
     rule_small_overlap_fits_tightly,
     rule_unambiguous,
+    settled,
     unsettled_rival,
 )
-from mrslam_env.merge.dissimilarity import Agreement, acceptance_index
+from mrslam_env.merge.dissimilarity import Agreement, WallMatch, acceptance_index, wall_match
 from mrslam_env.merge.pipeline import MergeConfig, ScoredHypothesis
 
 RESOLUTION = 0.1  # m: one cell is 0.01 m²
@@ -435,3 +436,99 @@ def test_ambiguity_is_refused_before_the_coverage_and_small_overlap_rules() -> N
     assert _refused_by(_candidates(virtual))[0] == "rule_covers_enough"
     covering = _small(psi=0.9, overlap_fraction=0.3)
     assert _refused_by(_candidates(covering))[0] == "rule_small_overlap_fits_tightly"
+
+
+# -- ambiguity settled at the input resolution (settle_ratio) -----------------------------------
+
+
+def _walls(missed_cells: int, walls: int = 1000) -> WallMatch:
+    """A wall match whose worse map misses ``missed_cells`` of ``walls`` (plus one)."""
+    return WallMatch(
+        walls1=walls,
+        matched1=walls - missed_cells,
+        conflicts1=0,
+        walls2=walls,
+        matched2=walls,
+        conflicts2=0,
+    )
+
+
+@pytest.mark.parametrize(
+    ("rival_missed", "accepted"),
+    [(499, True), (600, True), (498, False), (20, False)],
+)
+def test_a_rival_missing_five_times_the_walls_is_settled(rival_missed: int, accepted: bool) -> None:
+    # The best misses (99 + 1) / 1001 of its walls; the rival (m + 1) / 1001: settled from
+    # m + 1 = 5 x 100 (settle_ratio 5).
+    best = replace(_candidate(0.0, score=100.0), fine_walls=_walls(99))
+    rival = replace(_candidate(6.0, score=95.0), fine_walls=_walls(rival_missed))
+    assert settled(best, rival, CONFIG) is accepted
+    decision = decide(_candidates(best, rival), CONFIG)
+    assert (decision.chosen is best) is accepted
+    if accepted:
+        assert decision.reason == (
+            "score 100.0 m², next confident candidate 95.0 m², settled at the input "
+            f"resolution (walls missed 10.0%, rivals {(rival_missed + 1) / 1001:.1%} or more)"
+        )
+    else:
+        assert decision.reason == (
+            "no confident merge: ambiguous: two different transforms fit (scores 100.0 and "
+            "95.0 m²; walls missed at the input resolution 10.0% and "
+            f"{(rival_missed + 1) / 1001:.1%})"
+        )
+
+
+def test_an_ambiguity_is_settled_only_when_both_were_rejudged() -> None:
+    best = replace(_candidate(0.0, score=100.0), fine_walls=_walls(0))
+    rival = _candidate(6.0, score=95.0)
+    assert not settled(best, rival, CONFIG)
+    assert not settled(rival, best, CONFIG)
+    assert _refused_by(_candidates(best, rival))[0] == "rule_unambiguous"
+    # and every rival must be settled, not only the first
+    settled_rival = replace(_candidate(6.0, score=95.0), fine_walls=_walls(900))
+    third = replace(_candidate(-6.0, score=90.0), fine_walls=_walls(1))
+    assert _refused_by(_candidates(best, settled_rival, third))[0] == "rule_unambiguous"
+    assert decide(_candidates(best, settled_rival), CONFIG).chosen is best
+
+
+def _thick(grid: GridMap) -> GridMap:
+    """``grid`` with every wall drawn one cell thicker on each side (a real SLAM map's
+    ragged, doubled walls)."""
+    thick = ndimage.binary_dilation(grid.cells == OCCUPIED)
+    cells = np.where(thick, OCCUPIED, grid.cells).astype(np.int8)
+    return GridMap(cells=cells, resolution=grid.resolution, origin=grid.origin)
+
+
+def _turned_rival(m1: GridMap, m2: GridMap, truth: np.ndarray) -> tuple[bool, float, float]:
+    """The truth and the room turned by 180 degrees about its centre (its walls land on
+    walls, but for the inner stub), judged as :func:`settled` judges them, with equal
+    scores: whether the turned one is settled, and both shares of walls missed."""
+    rows, cols = m1.cells.shape
+    turned = np.array([cols * m1.resolution, rows * m1.resolution, math.pi])
+    best = replace(_candidate(0.0, score=100.0), fine_walls=wall_match(m1, m2, truth))
+    rival = replace(_candidate(6.0, score=100.0), fine_walls=wall_match(m1, m2, turned))
+    assert best.fine_walls is not None and rival.fine_walls is not None
+    return settled(best, rival, CONFIG), best.fine_walls.missed, rival.fine_walls.missed
+
+
+def test_a_thick_walled_truth_settles_a_turned_rival() -> None:
+    # The room with its inner wall stub, drawn with walls three cells thick in map 2: at
+    # the truth every wall of either map has a wall of the other within a cell, while the
+    # room turned by 180 degrees leaves the stub (30 of ~300 wall cells) unmatched.
+    m1 = room_map()
+    same, truth_missed, rival_missed = _turned_rival(m1, _thick(m1), np.zeros(3))
+    assert truth_missed < 0.01
+    assert rival_missed > 0.05
+    assert same
+
+
+def test_a_close_rival_is_not_settled() -> None:
+    # Without the stub the room looks the same turned by 180 degrees: both placements
+    # explain every wall, so the rival stays and the answer is refused.
+    m1 = room_map()
+    cells = m1.cells.copy()
+    cells[1:-1, 1:-1] = FREE
+    bare = GridMap(cells=cells, resolution=m1.resolution, origin=m1.origin)
+    same, truth_missed, rival_missed = _turned_rival(bare, _thick(bare), np.zeros(3))
+    assert rival_missed < CONFIG.settle_ratio * truth_missed
+    assert not same
