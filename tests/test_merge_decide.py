@@ -6,6 +6,9 @@
 - The order in which the rules apply: a candidate set that several rules would refuse is
   refused by the first of them.
 - :func:`decide` on no candidates, and an accepted decision's reason.
+- Ambiguity settled at the input resolution (:func:`settled`, ``MergeConfig.settle``):
+  hand-made wall matches around ``settle_ratio``, and the real :func:`wall_match` of a
+  room against its thick-walled copy, the truth against the room turned by 180 degrees.
 """
 
 from __future__ import annotations
@@ -38,7 +41,7 @@ from mrslam_env.merge.decide import (
     unsettled_rival,
 )
 from mrslam_env.merge.dissimilarity import Agreement, WallMatch, acceptance_index, wall_match
-from mrslam_env.merge.pipeline import MergeConfig, ScoredHypothesis
+from mrslam_env.merge.pipeline import MergeConfig, ScoredHypothesis, _prepare, _settle
 
 RESOLUTION = 0.1  # m: one cell is 0.01 m²
 PIVOT = np.array([0.0, 0.0])
@@ -532,3 +535,36 @@ def test_a_close_rival_is_not_settled() -> None:
     same, truth_missed, rival_missed = _turned_rival(bare, _thick(bare), np.zeros(3))
     assert rival_missed < CONFIG.settle_ratio * truth_missed
     assert not same
+
+
+def test_the_pipeline_rejudges_the_best_and_its_rivals_only_when_asked() -> None:
+    # merge_maps' settle stage (MergeConfig.settle) on the room with its stub at 0.05 m,
+    # its walls thick in map 2, judged at 0.1 m: the truth and the room turned by 180
+    # degrees, both confident with close scores. Off (the default): nothing is
+    # re-judged and the answer is ambiguous; on: both are refined and judged at 0.05 m,
+    # the turned room leaves the stub unmatched, and the truth is accepted.
+    m1 = room_map()
+    m2 = _thick(m1)
+    rows, cols = m1.cells.shape
+    turned = np.array([cols * m1.resolution, rows * m1.resolution, math.pi])
+    candidates = replace(
+        _candidates(
+            replace(_candidate(0.0, score=100.0), map1_from_map2=np.zeros(3)),
+            replace(_candidate(0.0, score=95.0), map1_from_map2=turned),
+        ),
+        pivot=np.array([2.0, 1.5]),
+    )
+    assert _refused_by(candidates)[0] == "rule_unambiguous"
+    work = _prepare(m1, m2, CONFIG)
+    assert work.resolution > m1.resolution
+    rng = np.random.default_rng(0)
+    assert _settle(m1, m2, work, candidates, CONFIG, rng) is candidates
+    config = replace(CONFIG, settle=True)
+    rejudged = _settle(m1, m2, work, candidates, config, rng)
+    best, rival = rejudged.hypotheses
+    assert best.fine_walls is not None and rival.fine_walls is not None
+    assert best.fine_transform is not None
+    assert np.hypot(*best.fine_transform[:2]) < 0.05
+    decision = decide(rejudged, config)
+    assert decision.chosen is best
+    assert "settled at the input resolution" in decision.reason

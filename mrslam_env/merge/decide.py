@@ -298,9 +298,11 @@ def settled(best: ScoredHypothesis, rival: ScoredHypothesis, config: MergeConfig
     the truth lays the walls of both maps on each other (missed 1-3 %) and such a rival
     does not (tens of %), while the two placements of a truly aliased pair miss alike.
     Counting from the walls, within a cell, a wall drawn thicker or doubled in one map
-    costs the truth nothing. Chosen on: the real-building set (seed 0) and built-in seeds
-    0 and 1; confirmed on: the held-out sets of docs/decisions.md, "Ambiguity settled at
-    the input resolution".
+    costs the truth nothing. ``settle_ratio`` chosen on: the real-building set (seed 0)
+    and built-in seeds 0 and 1 (successes 6.3-9.6, wrong answers up to 3.6). Not
+    confirmed: on the held-out built-in seed-3 set two `twin_wings` pairs merged on the
+    mirrored wing (ratios 6.1 and 19), so ``MergeConfig.settle`` is off by default
+    (docs/decisions.md, "Ambiguity settled at the input resolution").
     """
     if best.fine_walls is None or rival.fine_walls is None:
         return False
