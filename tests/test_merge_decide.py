@@ -464,8 +464,9 @@ def test_a_rival_missing_five_times_the_walls_is_settled(rival_missed: int, acce
     # The best misses (99 + 1) / 1001 of its walls; the rival (m + 1) / 1001: settled from
     # m + 1 = 5 x 100 (settle_ratio 5).
     best = replace(_candidate(0.0, score=100.0), fine_walls=_walls(99))
-    rival = replace(_candidate(6.0, score=95.0), fine_walls=_walls(rival_missed))
-    assert settled(best, rival, CONFIG) is accepted
+    turned = _candidate(0.0, math.pi / 2, score=95.0)  # the same place, turned by 90°
+    rival = replace(turned, fine_walls=_walls(rival_missed))
+    assert settled(best, rival, PIVOT, CONFIG) is accepted
     decision = decide(_candidates(best, rival), CONFIG)
     assert (decision.chosen is best) is accepted
     if accepted:
@@ -483,15 +484,26 @@ def test_a_rival_missing_five_times_the_walls_is_settled(rival_missed: int, acce
 
 def test_an_ambiguity_is_settled_only_when_both_were_rejudged() -> None:
     best = replace(_candidate(0.0, score=100.0), fine_walls=_walls(0))
-    rival = _candidate(6.0, score=95.0)
-    assert not settled(best, rival, CONFIG)
-    assert not settled(rival, best, CONFIG)
+    rival = _candidate(0.0, math.pi / 2, score=95.0)
+    assert not settled(best, rival, PIVOT, CONFIG)
+    assert not settled(rival, best, PIVOT, CONFIG)
     assert _refused_by(_candidates(best, rival))[0] == "rule_unambiguous"
     # and every rival must be settled, not only the first
-    settled_rival = replace(_candidate(6.0, score=95.0), fine_walls=_walls(900))
-    third = replace(_candidate(-6.0, score=90.0), fine_walls=_walls(1))
+    settled_rival = replace(_candidate(0.0, math.pi / 2, score=95.0), fine_walls=_walls(900))
+    third = replace(_candidate(0.0, math.pi, score=90.0), fine_walls=_walls(1))
     assert _refused_by(_candidates(best, settled_rival, third))[0] == "rule_unambiguous"
     assert decide(_candidates(best, settled_rival), CONFIG).chosen is best
+
+
+@pytest.mark.parametrize(("x", "accepted"), [(1.9, True), (2.0, False), (6.0, False)])
+def test_only_a_rival_placing_the_same_part_is_settled(x: float, accepted: bool) -> None:
+    # A rival that puts m2's centre settle_distance (2 m) or more from the best's places
+    # another part of the maps (the mirrored wing, the next aisle): however many walls
+    # it misses, it keeps the answer ambiguous.
+    best = replace(_candidate(0.0, score=100.0), fine_walls=_walls(0))
+    rival = replace(_candidate(x, score=95.0), fine_walls=_walls(900))
+    assert settled(best, rival, PIVOT, CONFIG) is accepted
+    assert (decide(_candidates(best, rival), CONFIG).chosen is best) is accepted
 
 
 def _thick(grid: GridMap) -> GridMap:
@@ -510,8 +522,11 @@ def _turned_rival(m1: GridMap, m2: GridMap, truth: np.ndarray) -> tuple[bool, fl
     turned = np.array([cols * m1.resolution, rows * m1.resolution, math.pi])
     best = replace(_candidate(0.0, score=100.0), fine_walls=wall_match(m1, m2, truth))
     rival = replace(_candidate(6.0, score=100.0), fine_walls=wall_match(m1, m2, turned))
+    rival = replace(rival, map1_from_map2=turned)
     assert best.fine_walls is not None and rival.fine_walls is not None
-    return settled(best, rival, CONFIG), best.fine_walls.missed, rival.fine_walls.missed
+    centre = np.array([cols * m1.resolution / 2, rows * m1.resolution / 2])
+    judged = settled(best, rival, centre, CONFIG)
+    return judged, best.fine_walls.missed, rival.fine_walls.missed
 
 
 def test_a_thick_walled_truth_settles_a_turned_rival() -> None:
@@ -537,12 +552,12 @@ def test_a_close_rival_is_not_settled() -> None:
     assert not same
 
 
-def test_the_pipeline_rejudges_the_best_and_its_rivals_only_when_asked() -> None:
+def test_the_pipeline_rejudges_the_best_and_its_rivals_when_settle_is_on() -> None:
     # merge_maps' settle stage (MergeConfig.settle) on the room with its stub at 0.05 m,
     # its walls thick in map 2, judged at 0.1 m: the truth and the room turned by 180
-    # degrees, both confident with close scores. Off (the default): nothing is
-    # re-judged and the answer is ambiguous; on: both are refined and judged at 0.05 m,
-    # the turned room leaves the stub unmatched, and the truth is accepted.
+    # degrees, both confident with close scores. Off: nothing is re-judged and the
+    # answer is ambiguous; on (the default): both are refined and judged at 0.05 m, the
+    # turned room leaves the stub unmatched, and the truth is accepted.
     m1 = room_map()
     m2 = _thick(m1)
     rows, cols = m1.cells.shape
@@ -558,8 +573,9 @@ def test_the_pipeline_rejudges_the_best_and_its_rivals_only_when_asked() -> None
     work = _prepare(m1, m2, CONFIG)
     assert work.resolution > m1.resolution
     rng = np.random.default_rng(0)
-    assert _settle(m1, m2, work, candidates, CONFIG, rng) is candidates
-    config = replace(CONFIG, settle=True)
+    assert _settle(m1, m2, work, candidates, replace(CONFIG, settle=False), rng) is candidates
+    config = CONFIG
+    assert config.settle
     rejudged = _settle(m1, m2, work, candidates, config, rng)
     best, rival = rejudged.hypotheses
     assert best.fine_walls is not None and rival.fine_walls is not None

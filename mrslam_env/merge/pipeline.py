@@ -236,25 +236,28 @@ class MergeConfig:
     outer wall placed across an aisle."""
     clean_conflict_length: float = 0.5
     """A candidate whose largest conflict group is at most this long (m) is clean."""
-    settle: bool = False
+    settle: bool = True
     """Settle an ambiguity at the input resolution
     (:func:`~mrslam_env.merge.decide.settled`): when a different confident candidate
     scores enough to make the answer ambiguous, the best and each such rival are refined
     once more at the finer input resolution (``settle_walk``) and judged by their walls
-    (:func:`~mrslam_env.merge.dissimilarity.wall_match`); a rival that misses at least
-    ``settle_ratio`` times the best's share of walls no longer makes the answer
-    ambiguous. No effect when the input resolution is not finer than the working one,
-    nor on the cascade's cheap pass. Off by default: it merges the `tb3_sandbox` pairs
-    the ambiguity ratio refuses (real sets: +2, +2 and +3 successes, no wrong answer),
-    but on the held-out built-in seed-3 set it merged two `twin_wings` pairs on the
-    mirrored wing, whose walls fit as well as or better than the truth's, where a rival
-    had refused them (docs/decisions.md, "Ambiguity settled at the input
-    resolution")."""
+    (:func:`~mrslam_env.merge.dissimilarity.wall_match`); a rival that places the same
+    part of the maps (``settle_distance``) and misses at least ``settle_ratio`` times the
+    best's share of walls no longer makes the answer ambiguous. No effect when the input
+    resolution is not finer than the working one, nor on the cascade's cheap pass. It
+    merges the `tb3_sandbox` pairs (a near-symmetric arena) that the ambiguity ratio
+    refuses (docs/decisions.md, "Ambiguity settled at the input resolution")."""
     settle_ratio: float = 5.0
     """How many times the best's share of missed walls
     (:attr:`~mrslam_env.merge.dissimilarity.WallMatch.missed`) a rival must miss, at the
     input resolution, to be settled (docs/decisions.md, "Ambiguity settled at the input
     resolution")."""
+    settle_distance: float = 2.0
+    """Only a rival that places the same part of the maps can be settled: it puts m2's
+    known centre within this distance (m) of where the best puts it (turned by any
+    angle). Walls at the input resolution compare two placements of the same overlap;
+    a placement of another part (the mirrored wing, the next aisle) explains its own
+    overlap and may fit as well as the truth (docs/decisions.md)."""
     settle_walk: RandomWalkConfig = field(
         default_factory=lambda: RandomWalkConfig(
             iterations=200,
@@ -293,6 +296,7 @@ class MergeConfig:
                 "refuting_conflict_length",
                 "hough_sweep_step",
                 "settle_ratio",
+                "settle_distance",
             ),
             non_negative=(
                 "hough_sweep",
