@@ -478,7 +478,7 @@ def test_a_rival_missing_five_times_the_walls_is_settled(rival_missed: int, acce
         assert decision.reason == (
             "no confident merge: ambiguous: two different transforms fit (scores 100.0 and "
             "95.0 m²; walls missed at the input resolution 10.0% and "
-            f"{(rival_missed + 1) / 1001:.1%})"
+            f"{(rival_missed + 1) / 1001:.1%}, 0.0 m apart)"
         )
 
 

@@ -391,9 +391,13 @@ def rule_unambiguous(candidates: Candidates, config: MergeConfig) -> str | None:
     best = candidates.hypotheses[0]
     walls = ""
     if best.fine_walls is not None and rival.fine_walls is not None:
+        point = np.asarray(candidates.pivot, dtype=np.float64)[None, :]
+        moved = transform_points(best.map1_from_map2, point) - transform_points(
+            rival.map1_from_map2, point
+        )
         walls = (
             f"; walls missed at the input resolution {best.fine_walls.missed:.1%} and "
-            f"{rival.fine_walls.missed:.1%}"
+            f"{rival.fine_walls.missed:.1%}, {float(np.hypot(*moved[0])):.1f} m apart"
         )
     return (
         "ambiguous: two different transforms fit "
