@@ -47,6 +47,7 @@ __all__ = [
     "contradicted",
     "decide",
     "judge",
+    "placed_apart",
     "refute",
     "rule_confident_fit",
     "rule_covers_enough",
@@ -115,11 +116,16 @@ class Decision:
     rule: str | None
 
 
+def placed_apart(a: FloatArray, b: FloatArray, pivot: FloatArray) -> float:
+    """How far apart (m) two transforms put ``pivot`` (a point of m2, its frame)."""
+    point = np.asarray(pivot, dtype=np.float64)[None, :]
+    return float(np.hypot(*(transform_points(a, point)[0] - transform_points(b, point)[0])))
+
+
 def same_answer(a: FloatArray, b: FloatArray, pivot: FloatArray, config: MergeConfig) -> bool:
     """Whether two transforms are one answer: they put ``pivot`` (a point of m2, its
     frame) within ``distinct_translation`` and turn within ``distinct_rotation``."""
-    point = np.asarray(pivot, dtype=np.float64)[None, :]
-    moved = float(np.hypot(*(transform_points(a, point)[0] - transform_points(b, point)[0])))
+    moved = placed_apart(a, b, pivot)
     turned = abs(wrap_scalar(float(a[2] - b[2])))
     return moved < config.distinct_translation and turned < config.distinct_rotation
 
@@ -313,11 +319,7 @@ def settled(
     """
     if best.fine_walls is None or rival.fine_walls is None:
         return False
-    point = np.asarray(pivot, dtype=np.float64)[None, :]
-    moved = transform_points(best.map1_from_map2, point) - transform_points(
-        rival.map1_from_map2, point
-    )
-    if float(np.hypot(*moved[0])) >= config.settle_distance:
+    if placed_apart(best.map1_from_map2, rival.map1_from_map2, pivot) >= config.settle_distance:
         return False
     return rival.fine_walls.missed >= config.settle_ratio * best.fine_walls.missed
 
@@ -391,13 +393,10 @@ def rule_unambiguous(candidates: Candidates, config: MergeConfig) -> str | None:
     best = candidates.hypotheses[0]
     walls = ""
     if best.fine_walls is not None and rival.fine_walls is not None:
-        point = np.asarray(candidates.pivot, dtype=np.float64)[None, :]
-        moved = transform_points(best.map1_from_map2, point) - transform_points(
-            rival.map1_from_map2, point
-        )
+        apart = placed_apart(best.map1_from_map2, rival.map1_from_map2, candidates.pivot)
         walls = (
             f"; walls missed at the input resolution {best.fine_walls.missed:.1%} and "
-            f"{rival.fine_walls.missed:.1%}, {float(np.hypot(*moved[0])):.1f} m apart"
+            f"{rival.fine_walls.missed:.1%}, {apart:.1f} m apart"
         )
     return (
         "ambiguous: two different transforms fit "

@@ -41,6 +41,7 @@ from mrslam_env.merge.decide import (
     ambiguous_rivals,
     decide,
     judge,
+    placed_apart,
     refute,
     same_answer,
     unsettled_rival,
@@ -898,7 +899,9 @@ def _settle(
     them are refined there by ``settle_walk`` and their walls matched
     (:func:`~mrslam_env.merge.dissimilarity.wall_match`); the candidates come back with
     :attr:`ScoredHypothesis.fine_walls` set on those, for
-    :func:`~mrslam_env.merge.decide.settled`. Otherwise they come back unchanged."""
+    :func:`~mrslam_env.merge.decide.settled`. Otherwise (no rival, or a rival placing
+    another part of the maps, ``settle_distance`` or more away, which is never settled)
+    they come back unchanged."""
     hypotheses = candidates.hypotheses
     fine = min(m1.resolution, m2.resolution)
     if (
@@ -909,8 +912,12 @@ def _settle(
     ):
         return candidates
     rivals = ambiguous_rivals(hypotheses, candidates.pivot, config)
-    if not rivals:
-        return candidates
+    best = hypotheses[0].map1_from_map2
+    if not rivals or any(
+        placed_apart(best, r.map1_from_map2, candidates.pivot) >= config.settle_distance
+        for r in rivals
+    ):
+        return candidates  # no rival, or one the input resolution cannot settle
     f1, f2 = at_resolution(m1, fine), at_resolution(m2, fine)
     sides = config.settle_walk.dissimilarity.wall_sides
     d1, d2 = distance_maps(f1, sides=sides), distance_maps(f2, sides=sides)
