@@ -6,6 +6,9 @@
 - The order in which the rules apply: a candidate set that several rules would refuse is
   refused by the first of them.
 - :func:`decide` on no candidates, and an accepted decision's reason.
+- Ambiguity settled at the input resolution (:func:`settled`, ``MergeConfig.settle``):
+  hand-made wall matches around ``settle_ratio``, and the real :func:`wall_match` of a
+  room against its thick-walled copy, the truth against the room turned by 180 degrees.
 """
 
 from __future__ import annotations
@@ -34,10 +37,11 @@ from mrslam_env.merge.decide import (
     rule_has_candidates,
     rule_small_overlap_fits_tightly,
     rule_unambiguous,
+    settled,
     unsettled_rival,
 )
-from mrslam_env.merge.dissimilarity import Agreement, acceptance_index
-from mrslam_env.merge.pipeline import MergeConfig, ScoredHypothesis
+from mrslam_env.merge.dissimilarity import Agreement, WallMatch, acceptance_index, wall_match
+from mrslam_env.merge.pipeline import MergeConfig, ScoredHypothesis, _prepare, _settle
 
 RESOLUTION = 0.1  # m: one cell is 0.01 m²
 PIVOT = np.array([0.0, 0.0])
@@ -435,3 +439,148 @@ def test_ambiguity_is_refused_before_the_coverage_and_small_overlap_rules() -> N
     assert _refused_by(_candidates(virtual))[0] == "rule_covers_enough"
     covering = _small(psi=0.9, overlap_fraction=0.3)
     assert _refused_by(_candidates(covering))[0] == "rule_small_overlap_fits_tightly"
+
+
+# -- ambiguity settled at the input resolution (settle_ratio) -----------------------------------
+
+
+def _walls(missed_cells: int, walls: int = 1000) -> WallMatch:
+    """A wall match whose worse map misses ``missed_cells`` of ``walls`` (plus one)."""
+    return WallMatch(
+        walls1=walls,
+        matched1=walls - missed_cells,
+        conflicts1=0,
+        walls2=walls,
+        matched2=walls,
+        conflicts2=0,
+    )
+
+
+@pytest.mark.parametrize(
+    ("rival_missed", "accepted"),
+    [(499, True), (600, True), (498, False), (20, False)],
+)
+def test_a_rival_missing_five_times_the_walls_is_settled(rival_missed: int, accepted: bool) -> None:
+    # The best misses (99 + 1) / 1001 of its walls; the rival (m + 1) / 1001: settled from
+    # m + 1 = 5 x 100 (settle_ratio 5).
+    best = replace(_candidate(0.0, score=100.0), fine_walls=_walls(99))
+    turned = _candidate(0.0, math.pi / 2, score=95.0)  # the same place, turned by 90°
+    rival = replace(turned, fine_walls=_walls(rival_missed))
+    assert settled(best, rival, PIVOT, CONFIG) is accepted
+    decision = decide(_candidates(best, rival), CONFIG)
+    assert (decision.chosen is best) is accepted
+    if accepted:
+        assert decision.reason == (
+            "score 100.0 m², next confident candidate 95.0 m², settled at the input "
+            f"resolution (walls missed 10.0%, rivals {(rival_missed + 1) / 1001:.1%} or more)"
+        )
+    else:
+        assert decision.reason == (
+            "no confident merge: ambiguous: two different transforms fit (scores 100.0 and "
+            "95.0 m²; walls missed at the input resolution 10.0% and "
+            f"{(rival_missed + 1) / 1001:.1%}, 0.0 m apart)"
+        )
+
+
+def test_an_ambiguity_is_settled_only_when_both_were_rejudged() -> None:
+    best = replace(_candidate(0.0, score=100.0), fine_walls=_walls(0))
+    rival = _candidate(0.0, math.pi / 2, score=95.0)
+    assert not settled(best, rival, PIVOT, CONFIG)
+    assert not settled(rival, best, PIVOT, CONFIG)
+    assert _refused_by(_candidates(best, rival))[0] == "rule_unambiguous"
+    # and every rival must be settled, not only the first
+    settled_rival = replace(_candidate(0.0, math.pi / 2, score=95.0), fine_walls=_walls(900))
+    third = replace(_candidate(0.0, math.pi, score=90.0), fine_walls=_walls(1))
+    assert _refused_by(_candidates(best, settled_rival, third))[0] == "rule_unambiguous"
+    assert decide(_candidates(best, settled_rival), CONFIG).chosen is best
+
+
+@pytest.mark.parametrize(("x", "accepted"), [(1.9, True), (2.0, False), (6.0, False)])
+def test_only_a_rival_placing_the_same_part_is_settled(x: float, accepted: bool) -> None:
+    # A rival that puts m2's centre settle_distance (2 m) or more from the best's places
+    # another part of the maps (the mirrored wing, the next aisle): however many walls
+    # it misses, it keeps the answer ambiguous.
+    best = replace(_candidate(0.0, score=100.0), fine_walls=_walls(0))
+    rival = replace(_candidate(x, score=95.0), fine_walls=_walls(900))
+    assert settled(best, rival, PIVOT, CONFIG) is accepted
+    assert (decide(_candidates(best, rival), CONFIG).chosen is best) is accepted
+
+
+def _thick(grid: GridMap) -> GridMap:
+    """``grid`` with every wall drawn one cell thicker on each side (a real SLAM map's
+    ragged, doubled walls)."""
+    thick = ndimage.binary_dilation(grid.cells == OCCUPIED)
+    cells = np.where(thick, OCCUPIED, grid.cells).astype(np.int8)
+    return GridMap(cells=cells, resolution=grid.resolution, origin=grid.origin)
+
+
+def _turned_rival(m1: GridMap, m2: GridMap, truth: np.ndarray) -> tuple[bool, float, float]:
+    """The truth and the room turned by 180 degrees about its centre (its walls land on
+    walls, but for the inner stub), judged as :func:`settled` judges them, with equal
+    scores: whether the turned one is settled, and both shares of walls missed."""
+    rows, cols = m1.cells.shape
+    turned = np.array([cols * m1.resolution, rows * m1.resolution, math.pi])
+    best = replace(_candidate(0.0, score=100.0), fine_walls=wall_match(m1, m2, truth))
+    rival = replace(_candidate(6.0, score=100.0), fine_walls=wall_match(m1, m2, turned))
+    rival = replace(rival, map1_from_map2=turned)
+    assert best.fine_walls is not None and rival.fine_walls is not None
+    centre = np.array([cols * m1.resolution / 2, rows * m1.resolution / 2])
+    judged = settled(best, rival, centre, CONFIG)
+    return judged, best.fine_walls.missed, rival.fine_walls.missed
+
+
+def test_a_thick_walled_truth_settles_a_turned_rival() -> None:
+    # The room with its inner wall stub, drawn with walls three cells thick in map 2: at
+    # the truth every wall of either map has a wall of the other within a cell, while the
+    # room turned by 180 degrees leaves the stub (30 of ~300 wall cells) unmatched.
+    m1 = room_map()
+    same, truth_missed, rival_missed = _turned_rival(m1, _thick(m1), np.zeros(3))
+    assert truth_missed < 0.01
+    assert rival_missed > 0.05
+    assert same
+
+
+def test_a_close_rival_is_not_settled() -> None:
+    # Without the stub the room looks the same turned by 180 degrees: both placements
+    # explain every wall, so the rival stays and the answer is refused.
+    m1 = room_map()
+    cells = m1.cells.copy()
+    cells[1:-1, 1:-1] = FREE
+    bare = GridMap(cells=cells, resolution=m1.resolution, origin=m1.origin)
+    same, truth_missed, rival_missed = _turned_rival(bare, _thick(bare), np.zeros(3))
+    assert rival_missed < CONFIG.settle_ratio * truth_missed
+    assert not same
+
+
+def test_the_pipeline_rejudges_the_best_and_its_rivals_when_settle_is_on() -> None:
+    # merge_maps' settle stage (MergeConfig.settle) on the room with its stub at 0.05 m,
+    # its walls thick in map 2, judged at 0.1 m: the truth and the room turned by 180
+    # degrees, both confident with close scores. Off: nothing is re-judged and the
+    # answer is ambiguous; on (the default): both are refined and judged at 0.05 m, the
+    # turned room leaves the stub unmatched, and the truth is accepted.
+    m1 = room_map()
+    m2 = _thick(m1)
+    rows, cols = m1.cells.shape
+    turned = np.array([cols * m1.resolution, rows * m1.resolution, math.pi])
+    candidates = replace(
+        _candidates(
+            replace(_candidate(0.0, score=100.0), map1_from_map2=np.zeros(3)),
+            replace(_candidate(0.0, score=95.0), map1_from_map2=turned),
+        ),
+        pivot=np.array([2.0, 1.5]),
+    )
+    assert _refused_by(candidates)[0] == "rule_unambiguous"
+    work = _prepare(m1, m2, CONFIG)
+    assert work.resolution > m1.resolution
+    rng = np.random.default_rng(0)
+    assert _settle(m1, m2, work, candidates, replace(CONFIG, settle=False), rng) is candidates
+    config = CONFIG
+    assert config.settle
+    rejudged = _settle(m1, m2, work, candidates, config, rng)
+    best, rival = rejudged.hypotheses
+    assert best.fine_walls is not None and rival.fine_walls is not None
+    assert best.fine_transform is not None
+    assert np.hypot(*best.fine_transform[:2]) < 0.05
+    decision = decide(rejudged, config)
+    assert decision.chosen is best
+    assert "settled at the input resolution" in decision.reason

@@ -41,11 +41,13 @@ __all__ = [
     "Candidates",
     "Decision",
     "ambiguous_rival",
+    "ambiguous_rivals",
     "check_conflict_fraction",
     "check_overlap_area",
     "contradicted",
     "decide",
     "judge",
+    "placed_apart",
     "refute",
     "rule_confident_fit",
     "rule_covers_enough",
@@ -53,6 +55,7 @@ __all__ = [
     "rule_small_overlap_fits_tightly",
     "rule_unambiguous",
     "same_answer",
+    "settled",
     "unsettled_rival",
 ]
 
@@ -113,11 +116,16 @@ class Decision:
     rule: str | None
 
 
+def placed_apart(a: FloatArray, b: FloatArray, pivot: FloatArray) -> float:
+    """How far apart (m) two transforms put ``pivot`` (a point of m2, its frame)."""
+    point = np.asarray(pivot, dtype=np.float64)[None, :]
+    return float(np.hypot(*(transform_points(a, point)[0] - transform_points(b, point)[0])))
+
+
 def same_answer(a: FloatArray, b: FloatArray, pivot: FloatArray, config: MergeConfig) -> bool:
     """Whether two transforms are one answer: they put ``pivot`` (a point of m2, its
     frame) within ``distinct_translation`` and turn within ``distinct_rotation``."""
-    point = np.asarray(pivot, dtype=np.float64)[None, :]
-    moved = float(np.hypot(*(transform_points(a, point)[0] - transform_points(b, point)[0])))
+    moved = placed_apart(a, b, pivot)
     turned = abs(wrap_scalar(float(a[2] - b[2])))
     return moved < config.distinct_translation and turned < config.distinct_rotation
 
@@ -259,17 +267,15 @@ def contradicted(best: ScoredHypothesis, other: ScoredHypothesis, config: MergeC
     )
 
 
-def ambiguous_rival(
+def ambiguous_rivals(
     scored: list[ScoredHypothesis], pivot: FloatArray, config: MergeConfig
-) -> ScoredHypothesis | None:
-    """The first confident candidate that is a *different* answer from the best one
-    (``scored[0]``, sorted best first) and scores enough to make the answer ambiguous, or
-    None.
-
-    Enough is ``ambiguity_ratio`` of the best score; for a :func:`contradicted` rival it
-    is ``contradicted_rival_ratio``.
-    """
+) -> list[ScoredHypothesis]:
+    """Every confident candidate that is a *different* answer from the best one
+    (``scored[0]``, sorted best first) and scores enough to make the answer ambiguous:
+    ``ambiguity_ratio`` of the best score, or ``contradicted_rival_ratio`` of it for a
+    :func:`contradicted` rival. Whether each is :func:`settled` is not asked."""
     best = scored[0]
+    rivals = []
     for other in scored[1:]:
         if not other.confident or same_answer(
             best.map1_from_map2, other.map1_from_map2, pivot, config
@@ -281,8 +287,53 @@ def ambiguous_rival(
             else config.ambiguity_ratio
         )
         if other.score >= ratio * best.score:
-            return other
-    return None
+            rivals.append(other)
+    return rivals
+
+
+def settled(
+    best: ScoredHypothesis, rival: ScoredHypothesis, pivot: FloatArray, config: MergeConfig
+) -> bool:
+    """Whether the input resolution settles the ambiguity between ``best`` and ``rival``:
+    both were re-judged there (:attr:`~mrslam_env.merge.pipeline.ScoredHypothesis.fine_walls`,
+    with ``MergeConfig.settle``), the rival places the same part of the maps (it puts
+    ``pivot``, m2's known centre, within ``settle_distance`` of where the best puts it,
+    turned by any angle), and it misses at least ``settle_ratio`` times the best's share
+    of walls (:attr:`~mrslam_env.merge.dissimilarity.WallMatch.missed`: each map's wall
+    cells with no wall of the other within one cell, the worse of the two maps).
+
+    At the working resolution (0.1 m or coarser) a placement turned by 90° in a
+    near-symmetric arena keeps its walls within the two-cell tolerance of the other
+    map's and scores like the truth; at the input resolution (0.02-0.05 m) the truth
+    lays the walls of both maps on each other (2-5 % missed on the real pairs) and such
+    a rival does not (24-33 %). Counting from the walls, within a cell, a wall drawn
+    thicker or doubled in one map costs the truth nothing. A rival that places another
+    part of the maps (the mirrored wing, the next aisle, a chance fit elsewhere) explains
+    an overlap of its own, which in a symmetric building may fit as well as the truth's,
+    so only the same part compared two ways is evidence. ``settle_ratio`` chosen on the
+    real-building set (seed 0) and built-in seeds 0 and 1 (rival/best 6.3-9.6 where the
+    best is the truth, at most 3.6 where it is wrong); ``settle_distance`` chosen on
+    built-in seed 3 (mirrored-wing rivals 3.4 and 22.6 m away were settled wrongly; the
+    settled truths' rivals were 0.2-1.4 m away on every set). Confirmed on: the sets of
+    docs/decisions.md, "Ambiguity settled at the input resolution".
+    """
+    if best.fine_walls is None or rival.fine_walls is None:
+        return False
+    if placed_apart(best.map1_from_map2, rival.map1_from_map2, pivot) >= config.settle_distance:
+        return False
+    return rival.fine_walls.missed >= config.settle_ratio * best.fine_walls.missed
+
+
+def ambiguous_rival(
+    scored: list[ScoredHypothesis], pivot: FloatArray, config: MergeConfig
+) -> ScoredHypothesis | None:
+    """The first of :func:`ambiguous_rivals` that the input resolution has not
+    :func:`settled`, or None."""
+    best = scored[0]
+    return next(
+        (r for r in ambiguous_rivals(scored, pivot, config) if not settled(best, r, pivot, config)),
+        None,
+    )
 
 
 def unsettled_rival(
@@ -322,7 +373,9 @@ def rule_unambiguous(candidates: Candidates, config: MergeConfig) -> str | None:
     """No confident candidate that is a *different* transform (:func:`same_answer`:
     ``distinct_translation`` m at the pivot, ``distinct_rotation`` rad) scores
     ``ambiguity_ratio`` of the best score or more, or ``contradicted_rival_ratio`` of it
-    for a :func:`contradicted` rival (:func:`ambiguous_rival`).
+    for a :func:`contradicted` rival (:func:`ambiguous_rival`), unless re-judging at the
+    input resolution :func:`settled` it (the rival misses ``settle_ratio`` times the best's
+    share of walls there).
 
     In repetitive buildings (shelf aisles, mirrored wings) the wrong placement often
     overlaps more than the right one and scores higher, so only "a second consistent answer
@@ -338,9 +391,16 @@ def rule_unambiguous(candidates: Candidates, config: MergeConfig) -> str | None:
     if rival is None:
         return None
     best = candidates.hypotheses[0]
+    walls = ""
+    if best.fine_walls is not None and rival.fine_walls is not None:
+        apart = placed_apart(best.map1_from_map2, rival.map1_from_map2, candidates.pivot)
+        walls = (
+            f"; walls missed at the input resolution {best.fine_walls.missed:.1%} and "
+            f"{rival.fine_walls.missed:.1%}, {apart:.1f} m apart"
+        )
     return (
         "ambiguous: two different transforms fit "
-        f"(scores {best.score:.1f} and {rival.score:.1f} m²)"
+        f"(scores {best.score:.1f} and {rival.score:.1f} m²{walls})"
     )
 
 
@@ -418,4 +478,11 @@ def decide(candidates: Candidates, config: MergeConfig) -> Decision:
         None,
     )
     margin = "" if runner_up is None else f", next confident candidate {runner_up.score:.1f} m²"
+    rivals = ambiguous_rivals(candidates.hypotheses, candidates.pivot, config)
+    if rivals and best.fine_walls is not None:
+        least = min(r.fine_walls.missed for r in rivals if r.fine_walls is not None)
+        margin += (
+            f", settled at the input resolution (walls missed {best.fine_walls.missed:.1%}, "
+            f"rivals {least:.1%} or more)"
+        )
     return Decision(chosen=best, reason=f"score {best.score:.1f} m²{margin}", rule=None)

@@ -38,8 +38,10 @@ from mrslam_env.merge.decide import (
     Candidates,
     Decision,
     ambiguous_rival,
+    ambiguous_rivals,
     decide,
     judge,
+    placed_apart,
     refute,
     same_answer,
     unsettled_rival,
@@ -48,10 +50,12 @@ from mrslam_env.merge.dissimilarity import (
     Agreement,
     DissimilarityConfig,
     DistanceMaps,
+    WallMatch,
     acceptance_index,
     dissimilarity,
     distance_maps,
     largest_conflict,
+    wall_match,
 )
 from mrslam_env.merge.fuse import at_resolution, fuse_maps
 from mrslam_env.merge.hypotheses import (
@@ -233,6 +237,38 @@ class MergeConfig:
     outer wall placed across an aisle."""
     clean_conflict_length: float = 0.5
     """A candidate whose largest conflict group is at most this long (m) is clean."""
+    settle: bool = True
+    """Settle an ambiguity at the input resolution
+    (:func:`~mrslam_env.merge.decide.settled`): when a different confident candidate
+    scores enough to make the answer ambiguous, the best and each such rival are refined
+    once more at the finer input resolution (``settle_walk``) and judged by their walls
+    (:func:`~mrslam_env.merge.dissimilarity.wall_match`); a rival that places the same
+    part of the maps (``settle_distance``) and misses at least ``settle_ratio`` times the
+    best's share of walls no longer makes the answer ambiguous. No effect when the input
+    resolution is not finer than the working one, nor on the cascade's cheap pass. It
+    merges the `tb3_sandbox` pairs (a near-symmetric arena) that the ambiguity ratio
+    refuses (docs/decisions.md, "Ambiguity settled at the input resolution")."""
+    settle_ratio: float = 5.0
+    """How many times the best's share of missed walls
+    (:attr:`~mrslam_env.merge.dissimilarity.WallMatch.missed`) a rival must miss, at the
+    input resolution, to be settled (docs/decisions.md, "Ambiguity settled at the input
+    resolution")."""
+    settle_distance: float = 2.0
+    """Only a rival that places the same part of the maps can be settled: it puts m2's
+    known centre within this distance (m) of where the best puts it (turned by any
+    angle). Walls at the input resolution compare two placements of the same overlap;
+    a placement of another part (the mirrored wing, the next aisle) explains its own
+    overlap and may fit as well as the truth (docs/decisions.md)."""
+    settle_walk: RandomWalkConfig = field(
+        default_factory=lambda: RandomWalkConfig(
+            iterations=200,
+            initial_std_xy=0.03,
+            initial_std_theta=math.radians(0.5),
+            dissimilarity=DissimilarityConfig(wall_sides=True),
+        )
+    )
+    """The short refinement of each candidate re-judged at the input resolution: the final
+    refinement's (``final_random_walk``) with a third of its iterations."""
     symmetry_proposals: int = 3
     """Aliasing check: with a confident best candidate ``b`` and each of the next
     best-scoring different candidates ``c`` (at most this many; 0 disables it), the
@@ -260,6 +296,8 @@ class MergeConfig:
                 "distinct_rotation",
                 "refuting_conflict_length",
                 "hough_sweep_step",
+                "settle_ratio",
+                "settle_distance",
             ),
             non_negative=(
                 "hough_sweep",
@@ -278,6 +316,7 @@ class MergeConfig:
         ratio = self.max_resolution_ratio
         require(name, "max_resolution_ratio", ratio, ratio >= 1.0, ">= 1")
         require(name, "cascade", self.cascade, isinstance(self.cascade, bool), "a bool")
+        require(name, "settle", self.settle, isinstance(self.settle, bool), "a bool")
         for attr in (
             "correlation_candidates",
             "hough_candidates",
@@ -301,6 +340,7 @@ class MergeConfig:
             ("pooling", HypothesisConfig),
             ("correlation", CorrelationConfig),
             ("random_walk", RandomWalkConfig),
+            ("settle_walk", RandomWalkConfig),
             ("final_random_walk", RandomWalkConfig),
         ):
             value = getattr(self, attr)
@@ -343,6 +383,14 @@ class ScoredHypothesis:
         ``"hough"`` (the same correlation at the Hough spectra's rotations,
         :attr:`MergeConfig.hough_candidates`) or ``"symmetry"``
         (:func:`symmetry_proposals`, the aliasing check).
+    fine_walls : WallMatch or None
+        When the candidate was re-judged at the input resolution to settle an ambiguity
+        (:attr:`MergeConfig.settle`): its walls against the other map's there, after a
+        short refinement (:func:`~mrslam_env.merge.dissimilarity.wall_match`); None
+        otherwise.
+    fine_transform : ndarray, shape (3,), or None
+        The transform of that re-judging (refined at the input resolution); None when not
+        re-judged.
     """
 
     map1_from_map2: FloatArray
@@ -356,6 +404,8 @@ class ScoredHypothesis:
     conflict_length: float = 0.0
     refuted: bool = False
     proposed_by: str = "virtual robot"
+    fine_walls: WallMatch | None = None
+    fine_transform: FloatArray | None = None
 
     @property
     def acceptance_index(self) -> float:
@@ -381,6 +431,7 @@ class ScoredHypothesis:
             "conflict_length": round(self.conflict_length, 3),
             "refuted": self.refuted,
             "proposed_by": self.proposed_by,
+            "walls_missed": None if self.fine_walls is None else round(self.fine_walls.missed, 4),
         }
 
 
@@ -834,6 +885,62 @@ def _refine_final(
     return chosen.map1_from_map2, float(psi), chosen.agreement
 
 
+def _settle(
+    m1: GridMap,
+    m2: GridMap,
+    work: _Working,
+    candidates: Candidates,
+    config: MergeConfig,
+    rng: np.random.Generator,
+) -> Candidates:
+    """Re-judge an ambiguity at the input resolution (:attr:`MergeConfig.settle`): when
+    confident rivals (:func:`~mrslam_env.merge.decide.ambiguous_rivals`) make the best
+    candidate ambiguous and the input is finer than the working grid, the best and each of
+    them are refined there by ``settle_walk`` and their walls matched
+    (:func:`~mrslam_env.merge.dissimilarity.wall_match`); the candidates come back with
+    :attr:`ScoredHypothesis.fine_walls` set on those, for
+    :func:`~mrslam_env.merge.decide.settled`. Otherwise (no rival, or a rival placing
+    another part of the maps, ``settle_distance`` or more away, which is never settled)
+    they come back unchanged."""
+    hypotheses = candidates.hypotheses
+    fine = min(m1.resolution, m2.resolution)
+    if (
+        not config.settle
+        or not hypotheses
+        or not hypotheses[0].confident
+        or fine >= work.resolution * (1.0 - 1e-9)
+    ):
+        return candidates
+    rivals = ambiguous_rivals(hypotheses, candidates.pivot, config)
+    best = hypotheses[0].map1_from_map2
+    if not rivals or any(
+        placed_apart(best, r.map1_from_map2, candidates.pivot) >= config.settle_distance
+        for r in rivals
+    ):
+        return candidates  # no rival, or one the input resolution cannot settle
+    f1, f2 = at_resolution(m1, fine), at_resolution(m2, fine)
+    sides = config.settle_walk.dissimilarity.wall_sides
+    d1, d2 = distance_maps(f1, sides=sides), distance_maps(f2, sides=sides)
+    chosen = {id(h) for h in [hypotheses[0], *rivals]}
+    rejudged = []
+    for h in hypotheses:
+        if id(h) in chosen:
+            walk = refine_random_walk(
+                f1,
+                f2,
+                h.map1_from_map2,
+                config=config.settle_walk,
+                rng=rng,
+                distances1=d1,
+                distances2=d2,
+            )
+            transform = np.asarray(walk.transform, dtype=np.float64)
+            walls = wall_match(f1, f2, transform, distances1=d1, distances2=d2)
+            h = replace(h, fine_walls=walls, fine_transform=transform)
+        rejudged.append(h)
+    return replace(candidates, hypotheses=rejudged)
+
+
 def _cheap_pass(
     work: _Working,
     config: MergeConfig,
@@ -961,6 +1068,8 @@ def merge_maps(
             proposals, initials = _propose(work, config, rng, trace, seconds)
         with _timed(seconds, "judge"):
             candidates, walks = _score(work, initials, config, rng, trace)
+        with _timed(seconds, "settle"):
+            candidates = _settle(known1, known2, work, candidates, config, rng)
         decision = decide(candidates, config)
     merge_trace = (
         MergeTrace(working1=work.w1, working2=work.w2, hypotheses=proposals, refinements=walks)
