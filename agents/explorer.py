@@ -677,7 +677,7 @@ class ExplorerPolicy:
         self._remember_close_returns(observation.get("scan"), pose)
         reason = self._replan_reason(robot_map, pose)
         if reason:
-            self._replan(self._with_close_returns(robot_map), pose, reason)
+            self._replan(self._with_close_returns(robot_map), pose, reason, robot_map)
         if self.status in ("done", "waiting", "blocked", "goal_unreachable", "idle"):
             self.follower.clear()
         scan = observation.get("scan")
@@ -752,11 +752,11 @@ class ExplorerPolicy:
         while self._close_returns and self._close_returns[0][0] < horizon:
             self._close_returns.popleft()
 
-    def _with_close_returns(self, grid: GridMap) -> GridMap:
-        """The map with remembered close returns and teammates' footprints marked
-        OCCUPIED (what the planner plans on)."""
+    def _with_close_returns(self, grid: GridMap, robots_too: bool = True) -> GridMap:
+        """The map with remembered close returns and (``robots_too``) teammates'
+        footprints marked OCCUPIED (what the planner plans on)."""
         parts = [p for _, p in self._close_returns]
-        robots = self._robots_in_the_way()
+        robots = self._robots_in_the_way() if robots_too else np.empty((0, 2))
         if len(robots):
             radius_cells = self.config.planner.robot_radius / grid.resolution
             footprint = _disk_offsets(radius_cells) * grid.resolution
@@ -900,7 +900,9 @@ class ExplorerPolicy:
 
     # --- replanning ------------------------------------------------------------------------
 
-    def _replan(self, grid: GridMap, pose: FloatArray, reason: str) -> None:
+    def _replan(
+        self, grid: GridMap, pose: FloatArray, reason: str, plain: GridMap | None = None
+    ) -> None:
         config = self.config
         self.replans += 1
         self.last_replan_reason = reason
@@ -919,7 +921,7 @@ class ExplorerPolicy:
         if self._given_goal is not None:
             self._plan_to_given_goal(cost_grid, distances)
         else:
-            self._plan_to_frontier(grid, cost_grid, start, reachable, pose)
+            self._plan_to_frontier(grid, cost_grid, start, reachable, pose, plain)
 
     def _follow(self, cost_grid: CostGrid, cells: IntArray, same_goal: bool = False) -> None:
         path = cost_grid.cell_to_world(shorten_path(cost_grid, cells))
@@ -949,7 +951,11 @@ class ExplorerPolicy:
         start: tuple[int, int],
         reachable: NDArray[np.bool_],
         pose: FloatArray,
+        plain: GridMap | None,
     ) -> None:
+        """Choose a frontier and plan there. ``grid`` is what the robot plans on (with
+        the teammates' footprints); ``plain``, when given, the map it was made from,
+        where the teammates' own paths are searched (``team_allocation``)."""
         config = self.config
         frontiers = extract_frontiers(grid, config.frontiers, reachable=reachable)
         self._grid_origin, self._grid_resolution = grid.origin, grid.resolution
@@ -963,7 +969,10 @@ class ExplorerPolicy:
             if config.team_allocation != "targets" and len(self._teammates):
                 # The whole search: the joint choice needs every goal's path cost.
                 distances = distance_field(cost_grid, pose, snap_distance=config.start_snap)
-                choice = self._joint_choice(frontiers, cost_grid, distances, excluded, current)
+                # The teammates' searches run on the map without their own footprints.
+                plain = grid if plain is None else self._with_close_returns(plain, False)
+                teammate_grid = inflate(plain, config.planner)
+                choice = self._joint_choice(frontiers, teammate_grid, distances, excluded, current)
             else:
                 bound = gains + config.tie_jitter
                 if current >= 0:
@@ -1065,7 +1074,7 @@ class ExplorerPolicy:
         with its teammates at their last known positions, or -1 when it leaves none.
 
         Row 0 of the path costs is this robot's (``distances``), the others a search from
-        each teammate's position on the same cost grid (the straight-line distance when no
+        each teammate's position on ``cost_grid`` (the straight-line distance when no
         passable cell lies near it). Undiscounted gains: the assignment itself keeps the
         robots apart."""
         config = self.config
