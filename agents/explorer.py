@@ -72,6 +72,7 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 TeamDiscount = Literal["overlap", "distance"]
+TeamAllocation = Literal["targets", "greedy", "minpos"]
 
 ExplorerStatus = Literal[
     "idle", "exploring", "waiting", "to_goal", "arrived", "goal_unreachable", "blocked", "done"
@@ -106,6 +107,16 @@ class ExplorerConfig:
     share of the frontier's view the target's view does not cover (both views the
     square of half-width ``frontiers.sensor_range`` the gain is counted in; no overlap
     across a mapped wall)."""
+    team_allocation: TeamAllocation = "targets"
+    """How a robot that knows its teammates' positions (in a common frame) chooses its
+    frontier. ``"targets"``: the best for itself, the teammates' targets taken and
+    frontiers near them discounted (``team_discount``). ``"greedy"``: its part of a
+    joint assignment of frontiers to itself and its teammates (:func:`assign_frontiers`,
+    Burgard et al. 2005's greedy cost-utility assignment: each teammate's path costs
+    from a search from its last known position, its current target kept with
+    ``target_bonus``). ``"minpos"``: among the frontiers worth a trip, one for which the
+    fewest teammates have a shorter path (Bautin et al. 2012, MinPos), the best utility
+    among those. Either falls back on ``"targets"`` when it leaves the robot nothing."""
     replan_interval: int = 25
     """Steps between routine replans."""
     min_replan_interval: int = 5
@@ -150,6 +161,10 @@ class ExplorerConfig:
         discount = self.team_discount
         ok = discount in ("overlap", "distance")
         require(type(self).__name__, "team_discount", discount, ok, "'overlap' or 'distance'")
+        allocation = self.team_allocation
+        ok = allocation in ("targets", "greedy", "minpos")
+        expected = "'targets', 'greedy' or 'minpos'"
+        require(type(self).__name__, "team_allocation", allocation, ok, expected)
 
     @classmethod
     def for_env(cls, env: EnvConfig, **overrides: Any) -> ExplorerConfig:
@@ -286,6 +301,7 @@ def assign_frontiers(
     min_gain: float = 0.0,
     view_range: float | None = None,
     grid: GridMap | None = None,
+    bonus: ArrayLike | None = None,
 ) -> IntArray:
     """Split frontiers between robots greedily, keeping the robots apart (Burgard et
     al., IEEE T-RO 2005).
@@ -318,6 +334,9 @@ def assign_frontiers(
         distance one.
     grid : GridMap, optional
         The map of ``goals``: no overlap across its walls.
+    bonus : array_like, shape (R, F), optional
+        Added to each (robot, frontier) utility, m² (e.g. for the frontier a robot is
+        already heading to); ``-inf`` rules a pair out.
 
     Returns
     -------
@@ -335,10 +354,15 @@ def assign_frontiers(
     if not separation > 0:
         raise ValueError(f"separation must be > 0 m, got {separation!r}")
     robots = costs.shape[0]
+    extra = np.zeros(costs.shape) if bonus is None else np.asarray(bonus, dtype=np.float64)
+    if extra.shape != costs.shape:
+        raise ValueError(
+            f"bonus must have the shape of path_costs {costs.shape}, got {extra.shape}"
+        )
     assignment = np.full(robots, -1, dtype=np.int64)
     for _ in range(robots):
         # Worth a trip on what is left of its gain once the taken goals' views are off.
-        utility = frontier_utility(gains_left, costs, cost_weight, min_gain=min_gain)
+        utility = frontier_utility(gains_left, costs, cost_weight, min_gain=min_gain) + extra
         utility[assignment >= 0] = -np.inf
         if not np.isfinite(utility).any():
             break
@@ -653,7 +677,7 @@ class ExplorerPolicy:
         self._remember_close_returns(observation.get("scan"), pose)
         reason = self._replan_reason(robot_map, pose)
         if reason:
-            self._replan(self._with_close_returns(robot_map), pose, reason)
+            self._replan(self._with_close_returns(robot_map), pose, reason, robot_map)
         if self.status in ("done", "waiting", "blocked", "goal_unreachable", "idle"):
             self.follower.clear()
         scan = observation.get("scan")
@@ -728,11 +752,11 @@ class ExplorerPolicy:
         while self._close_returns and self._close_returns[0][0] < horizon:
             self._close_returns.popleft()
 
-    def _with_close_returns(self, grid: GridMap) -> GridMap:
-        """The map with remembered close returns and teammates' footprints marked
-        OCCUPIED (what the planner plans on)."""
+    def _with_close_returns(self, grid: GridMap, robots_too: bool = True) -> GridMap:
+        """The map with remembered close returns and (``robots_too``) teammates'
+        footprints marked OCCUPIED (what the planner plans on)."""
         parts = [p for _, p in self._close_returns]
-        robots = self._robots_in_the_way()
+        robots = self._robots_in_the_way() if robots_too else np.empty((0, 2))
         if len(robots):
             radius_cells = self.config.planner.robot_radius / grid.resolution
             footprint = _disk_offsets(radius_cells) * grid.resolution
@@ -876,7 +900,9 @@ class ExplorerPolicy:
 
     # --- replanning ------------------------------------------------------------------------
 
-    def _replan(self, grid: GridMap, pose: FloatArray, reason: str) -> None:
+    def _replan(
+        self, grid: GridMap, pose: FloatArray, reason: str, plain: GridMap | None = None
+    ) -> None:
         config = self.config
         self.replans += 1
         self.last_replan_reason = reason
@@ -895,7 +921,7 @@ class ExplorerPolicy:
         if self._given_goal is not None:
             self._plan_to_given_goal(cost_grid, distances)
         else:
-            self._plan_to_frontier(grid, cost_grid, start, reachable)
+            self._plan_to_frontier(grid, cost_grid, start, reachable, pose, plain)
 
     def _follow(self, cost_grid: CostGrid, cells: IntArray, same_goal: bool = False) -> None:
         path = cost_grid.cell_to_world(shorten_path(cost_grid, cells))
@@ -924,7 +950,12 @@ class ExplorerPolicy:
         cost_grid: CostGrid,
         start: tuple[int, int],
         reachable: NDArray[np.bool_],
+        pose: FloatArray,
+        plain: GridMap | None,
     ) -> None:
+        """Choose a frontier and plan there. ``grid`` is what the robot plans on (with
+        the teammates' footprints); ``plain``, when given, the map it was made from,
+        where the teammates' own paths are searched (``team_allocation``)."""
         config = self.config
         frontiers = extract_frontiers(grid, config.frontiers, reachable=reachable)
         self._grid_origin, self._grid_resolution = grid.origin, grid.resolution
@@ -935,19 +966,29 @@ class ExplorerPolicy:
             # The search stops once no frontier left can beat the best one reached: the
             # choice, its path cost and its path are those of the whole search.
             gains, excluded, current = self._utility_parts(frontiers, grid)
-            bound = gains + config.tie_jitter
-            if current >= 0:
-                bound[current] += config.target_bonus
-            bound[excluded | (gains < config.min_gain)] = -np.inf
-            distances = best_goal_field(
-                cost_grid,
-                start,
-                frontiers.goal_cells,
-                bound,
-                cost_weight=config.cost_weight,
-                min_cost=config.follower.goal_tolerance,
-            )
-            choice = self._choose_frontier(frontiers, distances, (gains, excluded, current))
+            if config.team_allocation != "targets" and len(self._teammates):
+                # The whole search: the joint choice needs every goal's path cost.
+                distances = distance_field(cost_grid, pose, snap_distance=config.start_snap)
+                # The teammates' searches run on the map without their own footprints.
+                plain = grid if plain is None else self._with_close_returns(plain, False)
+                teammate_grid = inflate(plain, config.planner)
+                choice = self._joint_choice(frontiers, teammate_grid, distances, excluded, current)
+            else:
+                bound = gains + config.tie_jitter
+                if current >= 0:
+                    bound[current] += config.target_bonus
+                bound[excluded | (gains < config.min_gain)] = -np.inf
+                distances = best_goal_field(
+                    cost_grid,
+                    start,
+                    frontiers.goal_cells,
+                    bound,
+                    cost_weight=config.cost_weight,
+                    min_cost=config.follower.goal_tolerance,
+                )
+                choice = -1
+            if choice < 0:
+                choice = self._choose_frontier(frontiers, distances, (gains, excluded, current))
         if choice < 0:
             self._target = None
             self._target_cells = np.empty((0, 2))
@@ -1020,6 +1061,71 @@ class ExplorerPolicy:
             excluded |= _separation_discount(frontiers.goals, self._teammate_targets, radius) < 1.0
         excluded |= self._blacklisted(frontiers)
         return gains, excluded, self._current_frontier(frontiers)
+
+    def _joint_choice(
+        self,
+        frontiers: Frontiers,
+        cost_grid: CostGrid,
+        distances: DistanceField,
+        excluded: NDArray[np.bool_],
+        current: int,
+    ) -> int:
+        """This robot's frontier by ``team_allocation`` (``"greedy"`` or ``"minpos"``)
+        with its teammates at their last known positions, or -1 when it leaves none.
+
+        Row 0 of the path costs is this robot's (``distances``), the others a search from
+        each teammate's position on ``cost_grid`` (the straight-line distance when no
+        passable cell lies near it). Undiscounted gains: the assignment itself keeps the
+        robots apart."""
+        config = self.config
+        rows, cols = frontiers.goal_cells.T
+        teammates = self._teammates
+        costs = np.empty((1 + len(teammates), len(frontiers)))
+        costs[0] = distances.cost[rows, cols]
+        for k, position in enumerate(teammates):
+            try:
+                field = distance_field(cost_grid, position, snap_distance=config.start_snap)
+                costs[1 + k] = field.cost[rows, cols]
+            except ValueError:
+                costs[1 + k] = np.hypot(*(frontiers.goals - position).T)
+        own = np.zeros(len(frontiers))
+        own[excluded | (costs[0] < config.follower.goal_tolerance)] = -np.inf
+        if current >= 0:
+            own[current] += config.target_bonus
+        own += config.tie_jitter * self.rng.random(len(frontiers))
+        if config.team_allocation == "minpos":
+            utility = frontier_utility(
+                frontiers.gains, costs[0], config.cost_weight, min_gain=config.min_gain
+            )
+            utility += own
+            ok = np.isfinite(utility)
+            if not ok.any():
+                return -1
+            # Rank: how many teammates have a shorter path to the frontier.
+            rank = (costs[1:] < costs[0][None, :]).sum(axis=0)
+            best_rank = rank[ok].min()
+            utility[rank > best_rank] = -np.inf
+            return int(np.argmax(utility))
+        bonus = np.zeros(costs.shape)
+        bonus[0] = own
+        targets = self._teammate_targets
+        if len(targets) == len(teammates):
+            # A teammate keeps its target (the bonus this robot gives its own).
+            radius = self.shared_target_radius
+            for k, target in enumerate(targets):
+                near = np.hypot(*(frontiers.goals - target).T)
+                if near.min() < radius:
+                    bonus[1 + k, int(np.argmin(near))] += config.target_bonus
+        assignment = assign_frontiers(
+            frontiers.goals,
+            frontiers.gains,
+            costs,
+            cost_weight=config.cost_weight,
+            separation=config.separation,
+            min_gain=config.min_gain,
+            bonus=bonus,
+        )
+        return int(assignment[0])
 
     def _choose_frontier(
         self,

@@ -15,7 +15,8 @@ One step per function:
    (its 4-connected unknown regions), so that unknown space behind a mapped wall (outside
    the building, inside a pillar) does not lure the robot.
 4. :func:`extract_frontiers` puts them together and gives each frontier a goal cell the
-   robot can reach (the reachable cell nearest to the frontier's middle).
+   robot can reach and see it from (the reachable cell nearest to the frontier's middle
+   with no mapped wall between them).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
-from mrslam_env.gridmap import GridMap, known_window
+from mrslam_env.gridmap import OCCUPIED, GridMap, known_window
 from mrslam_env.validation import check_fields, require
 
 __all__ = [
@@ -594,40 +595,112 @@ def _goal_cells(
     count: int,
     centroid_cells: FloatArray,
     reachable: BoolArray,
+    occupied: BoolArray,
     resolution: float,
     max_goal_offset: float,
     offset: tuple[int, int],
     cells: IntArray,
 ) -> tuple[IntArray, BoolArray]:
-    """Per frontier: the reachable cell nearest to its cell closest to its centroid, among
-    its cells within ``max_goal_offset`` of reachable space.
+    """Per frontier: a reachable cell that sees one of its cells, the one closest to its
+    centroid that can be seen.
 
-    A frontier with no such cell is invalid. ``labels`` and ``reachable`` may be a window of the map
-    whose cell [0, 0] is the map's cell ``offset``; ``centroid_cells`` and the goal cells
-    returned are in the map's cells; ``cells`` is ``np.argwhere(labels > 0)``.
+    A frontier cell is seen from a cell when no ``occupied`` cell lies on the segment
+    between them (:func:`_seen_from`). Its goal is its nearest reachable cell when that is
+    within ``max_goal_offset`` and sees it, else the nearest reachable cell within
+    ``max_goal_offset`` that does; the frontier's cells are tried in order of distance to
+    its centroid. A frontier with no such cell is invalid: the reachable space near it
+    lies behind a wall (a frontier mapped through a gap in a wall, or behind a pillar),
+    and a robot sent there would stand at the goal without ever seeing it. ``labels``,
+    ``reachable`` and ``occupied`` may be a window of the map whose cell [0, 0] is the
+    map's cell ``offset``; ``centroid_cells`` and the goal cells returned are in the map's
+    cells; ``cells`` is ``np.argwhere(labels > 0)``.
     """
     goal_cells = np.zeros((count, 2), dtype=np.int64)
     valid = np.zeros(count, dtype=bool)
     if count == 0 or not reachable.any():
         return goal_cells, valid
-    owner = labels[cells[:, 0], cells[:, 1]] - 1
+    owner = (labels[cells[:, 0], cells[:, 1]] - 1).astype(np.int64)
     to_centroid = ((cells + np.asarray(offset) - centroid_cells[owner]) ** 2).sum(axis=1)
     # The nearest reachable cell at the frontier cells only (the transform scipy's
     # distance_transform_edt would compute everywhere, ties broken as it does).
     nearest = _nearest_feature_at(reachable, cells)
     steps = (nearest - cells).astype(np.float64)
     to_reachable = np.sqrt(steps[:, 0] * steps[:, 0] + steps[:, 1] * steps[:, 1]) * resolution
-    # The cell closest to the middle among those close enough to reachable space (the
-    # first in row-major order on a tie); a frontier with none is dropped (even its cell
-    # closest to reachable space is farther than max_goal_offset).
+    # Cells closer to the middle first (the first in row-major order on a tie); cells
+    # farther than max_goal_offset from reachable space are no candidates.
     key = np.where(to_reachable <= max_goal_offset, to_centroid, np.inf)
     order = np.lexsort((key, owner))  # stable: ties keep the row-major order
-    first = order[np.flatnonzero(np.diff(owner[order], prepend=-1))]
-    chosen = first[np.isfinite(key[first])]
-    frontiers = owner[chosen]
-    goal_cells[frontiers] = nearest[chosen] + np.asarray(offset)
+    order = order[np.isfinite(key[order])]
+    reach = max_goal_offset / resolution
+    disk = _disk_by_distance(reach)
+    chosen = _first_seen(order, owner, cells, nearest, reachable, occupied, disk, reach)
+    frontiers = np.flatnonzero(chosen[:, 0] >= 0)
+    goal_cells[frontiers] = chosen[frontiers] + np.asarray(offset)
     valid[frontiers] = True
     return goal_cells, valid
+
+
+def _disk_by_distance(radius_cells: float) -> IntArray:
+    """Cell offsets (K, 2) within ``radius_cells`` of the centre, nearest first (row-major
+    order on a tie)."""
+    reach = math.floor(radius_cells)
+    rows, cols = np.mgrid[-reach : reach + 1, -reach : reach + 1]
+    squared = (rows**2 + cols**2).ravel()
+    inside = np.flatnonzero(squared <= radius_cells**2)
+    inside = inside[np.argsort(squared[inside], kind="stable")]
+    return np.stack([rows.ravel()[inside], cols.ravel()[inside]], axis=1).astype(np.int64)
+
+
+@numba.njit(cache=True)
+def _first_seen(
+    order: IntArray,
+    owner: IntArray,
+    cells: IntArray,
+    nearest: IntArray,
+    reachable: BoolArray,
+    occupied: BoolArray,
+    disk: IntArray,
+    reach: float,
+) -> IntArray:
+    """Per frontier (``owner.max() + 1`` rows), the goal cell of :func:`_goal_cells` or
+    ``(-1, -1)``: ``order`` lists the candidate frontier cells (indices into ``cells``)
+    frontier by frontier, best first."""
+    count = 0
+    for k in range(len(owner)):
+        count = max(count, owner[k] + 1)
+    out = np.full((count, 2), -1, dtype=np.int64)
+    rows, cols = reachable.shape
+    for k in order:
+        frontier = owner[k]
+        if out[frontier, 0] >= 0:
+            continue
+        r, c = cells[k, 0], cells[k, 1]
+        nr, nc = nearest[k, 0], nearest[k, 1]
+        if (nr - r) ** 2 + (nc - c) ** 2 <= reach * reach and _seen_from(occupied, nr, nc, r, c):
+            out[frontier, 0], out[frontier, 1] = nr, nc
+            continue
+        for j in range(len(disk)):
+            gr, gc = r + disk[j, 0], c + disk[j, 1]
+            inside = 0 <= gr < rows and 0 <= gc < cols
+            if inside and reachable[gr, gc] and _seen_from(occupied, gr, gc, r, c):
+                out[frontier, 0], out[frontier, 1] = gr, gc
+                break
+    return out
+
+
+@numba.njit(cache=True)
+def _seen_from(occupied: BoolArray, r0: int, c0: int, r1: int, c1: int) -> bool:
+    """Whether no ``occupied`` cell lies on the segment between cells ``(r0, c0)`` and
+    ``(r1, c1)``, ends excluded: sampled twice per cell along its longer axis, so that a
+    diagonal wall (cells touching at corners) blocks it too."""
+    dr, dc = r1 - r0, c1 - c0
+    n = 2 * max(abs(dr), abs(dc))
+    for k in range(1, n):
+        r = r0 + (2 * k * dr + n) // (2 * n)  # k dr / n, rounded
+        c = c0 + (2 * k * dc + n) // (2 * n)
+        if (r != r0 or c != c0) and (r != r1 or c != c1) and occupied[r, c]:
+            return False
+    return True
 
 
 def extract_frontiers(
@@ -644,8 +717,9 @@ def extract_frontiers(
     config : FrontierConfig, optional
     reachable : ndarray of bool, shape (rows, cols), optional
         Cells the robot can reach (e.g. ``DistanceField.reachable``). When given, each
-        frontier's goal is a reachable cell and frontiers with none within
-        ``max_goal_offset`` are dropped; without it, FREE cells count as reachable.
+        frontier's goal is a reachable cell with no mapped wall between it and one of the
+        frontier's cells, and frontiers with none within ``max_goal_offset`` are dropped;
+        without it, FREE cells count as reachable.
 
     Returns
     -------
@@ -693,6 +767,7 @@ def extract_frontiers(
         count,
         centroid_cells,
         reach,
+        window.cells == OCCUPIED,
         grid.resolution,
         config.max_goal_offset,
         offset,

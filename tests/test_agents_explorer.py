@@ -144,6 +144,37 @@ def test_teammate_targets_push_the_choice_elsewhere() -> None:
     assert policy.target is not None and policy.target[0] > 6.0
 
 
+@pytest.mark.parametrize(
+    ("allocation", "goes_east"), [("targets", False), ("greedy", True), ("minpos", True)]
+)
+def test_a_joint_allocation_leaves_a_frontier_to_the_teammate_nearer_to_it(
+    allocation: str, goes_east: bool
+) -> None:
+    # The robot is 2.5 m from the west doorway and 3.5 m from the east one; a teammate
+    # (target not known yet) stands 0.5 m from the west doorway. On its own the robot
+    # takes the nearer west doorway; a joint allocation gives that one to the teammate
+    # and the east one to the robot.
+    grid = two_rooms()
+    config = ExplorerConfig(team_allocation=allocation)  # type: ignore[arg-type]
+    policy = ExplorerPolicy(np.random.default_rng(0), config)
+    policy.set_teammates(np.array([[1.5, 2.5]]))
+    policy.act({"pose": np.array([3.5, 2.5, 0.0])}, grid)
+    assert policy.target is not None
+    assert (policy.target[0] > 6.0) == goes_east
+
+
+def test_assignment_bonus_keeps_a_robot_on_its_frontier() -> None:
+    goals = np.array([[0.0, 0.0], [10.0, 0.0]])
+    costs = np.array([[1.0, 9.0], [2.0, 4.0]])  # robot 0 is the nearer to frontier 0
+    plain = assign_frontiers(goals, [5.0, 5.0], costs, cost_weight=1.0, min_gain=0.5)
+    np.testing.assert_array_equal(plain, [0, 1])
+    bonus = np.array([[0.0, 0.0], [8.0, 0.0]])  # robot 1 heads for frontier 0
+    kept = assign_frontiers(goals, [5.0, 5.0], costs, cost_weight=1.0, min_gain=0.5, bonus=bonus)
+    np.testing.assert_array_equal(kept, [1, 0])
+    with pytest.raises(ValueError, match="bonus must have the shape"):
+        assign_frontiers(goals, [5.0, 5.0], costs, bonus=np.zeros((1, 2)))
+
+
 def test_a_robot_whose_frontiers_are_teammates_targets_waits_and_is_not_done() -> None:
     # Regression: the only frontier left is the teammate's target. The robot used to
     # count that as nothing left, report done after `done_after` replans, and with all

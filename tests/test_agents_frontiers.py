@@ -244,6 +244,44 @@ def test_unreachable_frontiers_are_dropped_and_goals_are_reachable() -> None:
     assert len(far) == 0
 
 
+def strip_behind_a_wall(strip_from_row: int) -> tuple[GridMap, np.ndarray]:
+    """A 4 m x 4 m map (0.05 m cells) walled at rows 0 and 79 and column 0: a wall along
+    column 45, FREE on both sides up to column 59, UNKNOWN from column 60 (the frontier
+    is column 59, in two pieces). Reachable: the left side up to column 43 (the wall's
+    inflation beyond), and the strip between the wall and the frontier only from row
+    ``strip_from_row`` (clutter below)."""
+    cells = np.full((80, 80), UNKNOWN, dtype=np.int8)
+    cells[:, :60] = FREE
+    cells[:, 45] = OCCUPIED
+    cells[[0, -1], :60] = OCCUPIED
+    cells[:, 0] = OCCUPIED
+    reachable = np.zeros(cells.shape, dtype=bool)
+    reachable[1:-1, 1:44] = True
+    reachable[strip_from_row:-1, 46:59] = True
+    return GridMap(cells=cells, resolution=0.05), reachable
+
+
+def test_a_frontier_is_seen_from_its_goal_not_through_a_wall() -> None:
+    # The lower frontier piece (rows 0-39) is nearest to the left room (0.8 m, across the
+    # wall); a robot there would reach its goal and never see it. Its goal is the nearest
+    # reachable cell that sees it: in the strip, 1.0 m up from the piece's middle.
+    grid, reachable = strip_behind_a_wall(strip_from_row=40)
+    frontiers = extract_frontiers(grid, FrontierConfig(max_goal_offset=1.5), reachable=reachable)
+    assert len(frontiers) == 2
+    for index in range(len(frontiers)):
+        row, col = frontiers.goal_cells[index]
+        assert reachable[row, col]
+        assert col > 45  # the frontier's side of the wall
+    lower = int(np.argmin(frontiers.centroids[:, 1]))
+    assert tuple(frontiers.goal_cells[lower]) == (40, 58)
+    # No reachable cell within max_goal_offset sees the lower piece: it is dropped.
+    grid, reachable = strip_behind_a_wall(strip_from_row=72)
+    frontiers = extract_frontiers(grid, FrontierConfig(max_goal_offset=1.5), reachable=reachable)
+    assert len(frontiers) == 1
+    assert frontiers.centroids[0, 1] > grid.cell_to_world(np.array([[40, 0]]))[0, 1]
+    assert frontiers.goal_cells[0, 1] > 45
+
+
 def test_extraction_does_not_modify_the_map() -> None:
     grid = room_with_door()
     before = grid.cells.copy()
