@@ -74,8 +74,8 @@ from agents.rendezvous import (
 from agents.robot import DEFAULT_ENV, EnvFigures, build_for_env, check_against_env
 from mrslam_env.config import EnvConfig
 from mrslam_env.geometry import compose, inverse, transform_points
-from mrslam_env.gridmap import GridMap
-from mrslam_env.merge.decide import check_conflict_fraction, judge
+from mrslam_env.gridmap import UNKNOWN, GridMap
+from mrslam_env.merge.decide import check_conflict_fraction
 from mrslam_env.merge.dissimilarity import acceptance_index
 from mrslam_env.merge.fuse import at_resolution, fuse_all, fuse_maps, resample_map, warp_map
 from mrslam_env.merge.graph import GraphEdge, JointRefineConfig, alignment_edge, refine_jointly
@@ -98,6 +98,7 @@ __all__ = [
     "distinct_hypotheses",
     "in_plain_sight",
     "mean_pose",
+    "window",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -961,10 +962,17 @@ class TeamCoordinator:
         self, hypothesis: FloatArray, sides: MapSource, poses: list[FloatArray]
     ) -> bool:
         """Refine the sightings' ``hypothesis`` on the pair's maps (kept only when the
-        refined placement passes the merge's candidate checks and stays within the
-        rendezvous tolerances), check the maps agree at it (the merge's conflict check),
-        and put it to verification: True; False when the maps conflict (rejected)."""
+        refined placement stays within the rendezvous tolerances and the maps do not
+        conflict there), check the maps agree at it within the peer sensor's range of
+        both robots (the merge's conflict check), and put it to verification: True;
+        False when the maps conflict (rejected)."""
         m0, m1 = sides(0), sides(1)
+        # Checked where the robots met: the sightings vouch for the maps there; far
+        # from it, either map's SLAM drift may make even the true placement conflict.
+        near0, near1 = (
+            window(m, pose[:2], self.config.peer_range)
+            for m, pose in zip((m0, m1), poses, strict=True)
+        )
         names = [f"robot_{r}" for r in self.pair]
         x, y, theta = hypothesis
         self.hypotheses_tested += 1
@@ -977,10 +985,10 @@ class TeamCoordinator:
         if (
             refined is not None
             and self._within_verified(refined, hypothesis, poses[1][:2])
-            and self._map_check(m0, m1, refined, full=True) is None
+            and self._map_check(near0, near1, refined) is None
         ):
             transform, how = refined, "refined on the maps"
-        conflict = self._map_check(m0, m1, transform, full=False)
+        conflict = self._map_check(near0, near1, transform)
         seen = (
             f"{names[0]} and {names[1]} saw each other on {self.config.sighting_count} "
             f"steps: hypothesis x {x:.2f}, y {y:.2f}, theta {theta:.3f}"
@@ -1005,17 +1013,13 @@ class TeamCoordinator:
         )
         return True
 
-    def _map_check(
-        self, m0: GridMap, m1: GridMap, transform: FloatArray, *, full: bool
-    ) -> str | None:
-        """Why the maps disagree at ``transform`` at the merge's working resolution (the
-        merge's conflict check; ``full``: all its candidate checks), or None."""
+    def _map_check(self, m0: GridMap, m1: GridMap, transform: FloatArray) -> str | None:
+        """Why the maps conflict at ``transform`` (the merge's conflict check, at its
+        working resolution), or None."""
         config = self.config.merge
         resolution = max(m0.resolution, m1.resolution, config.working_resolution)
         w0, w1 = at_resolution(m0, resolution), at_resolution(m1, resolution)
         agreement = acceptance_index(w0, w1, transform)
-        if full:
-            return judge(agreement, resolution, config)[2] or None
         return check_conflict_fraction(agreement, resolution, config)
 
     def _moved_off(self, rendezvous: _Rendezvous, poses: list[FloatArray]) -> bool:
@@ -1701,3 +1705,17 @@ def mean_pose(poses: ArrayLike) -> FloatArray:
     array = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
     heading = math.atan2(float(np.sin(array[:, 2]).mean()), float(np.cos(array[:, 2]).mean()))
     return np.array([array[:, 0].mean(), array[:, 1].mean(), heading])
+
+
+def window(grid: GridMap, point: ArrayLike, radius: float) -> GridMap:
+    """The square of ``grid`` within ``radius`` (m) of ``point`` (its frame), clipped to
+    the grid (one unknown cell when the point is outside it)."""
+    row, col = grid.world_to_cell(np.asarray(point, dtype=np.float64)[None, :2])[0]
+    reach = math.ceil(radius / grid.resolution)
+    rows, cols = grid.shape
+    r0, r1 = max(row - reach, 0), min(row + reach + 1, rows)
+    c0, c1 = max(col - reach, 0), min(col + reach + 1, cols)
+    if r0 >= r1 or c0 >= c1:
+        return GridMap(cells=np.full((1, 1), UNKNOWN, dtype=np.int8), resolution=grid.resolution)
+    origin = (grid.origin[0] + c0 * grid.resolution, grid.origin[1] + r0 * grid.resolution)
+    return GridMap(cells=grid.cells[r0:r1, c0:c1].copy(), resolution=grid.resolution, origin=origin)

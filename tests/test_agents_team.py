@@ -17,6 +17,7 @@ from agents.team import (
     distinct_hypotheses,
     in_plain_sight,
     mean_pose,
+    window,
 )
 from mrslam_env.config import EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
@@ -519,9 +520,9 @@ def test_a_hypothesis_from_sightings_whose_maps_conflict_is_rejected_at_once() -
         observations, *_ = env.step({a: actions[i] for i, a in enumerate(env.possible_agents)})
     sides = team._side_maps(maps)
     poses = [team.pose_in_root(r, team._poses[r]) for r in team.pair]
-    assert team._map_check(sides(0), sides(1), truth, full=False) is None
+    assert team._map_check(sides(0), sides(1), truth) is None
     turned = compose(truth, [0.0, 0.0, np.pi / 2])
-    assert team._map_check(sides(0), sides(1), turned, full=False) is not None
+    assert team._map_check(sides(0), sides(1), turned) is not None
     team.pop_decisions()
     assert not team._form_from_sightings(turned, sides, poses)
     assert team.rendezvous is None and team.state is TeamState.NO_INTERACTION
@@ -570,3 +571,14 @@ def test_a_hypothesis_from_sightings_is_rejected_when_slam_drifts_between_meetin
     verdict = next(d for d in decisions[formed[0] :] if "rejected" in d or "accepted" in d)
     assert "hypothesis #0 rejected" in verdict, decisions
     assert team.rejected == []  # not kept: the merge's answers near it stay open
+
+
+def test_a_window_of_a_map_keeps_its_cells_in_place() -> None:
+    cells = np.full((40, 60), FREE, dtype=np.int8)
+    cells[10, 30] = OCCUPIED
+    grid = GridMap(cells=cells, resolution=0.1, origin=(-1.0, 2.0))
+    near = window(grid, [2.05, 3.05], 0.5)  # cell (10, 30) at the centre
+    assert near.shape == (11, 11)
+    wall = near.cell_to_world(np.argwhere(near.occupied))
+    assert np.allclose(wall, grid.cell_to_world(np.array([[10, 30]])))
+    assert window(grid, [100.0, 100.0], 1.0).unknown.all()
