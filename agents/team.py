@@ -675,6 +675,8 @@ class TeamCoordinator:
                 TeamState.COORDINATED_EXPLORATION,
             ) and not self._maybe_sighting(observations, maps):
                 self._maybe_generate(observations, maps)
+            elif self._waiting_on_sightings():
+                self._generate_beside_sightings(maps)
             if self.state is TeamState.HYPOTHESIS_VERIFICATION:
                 self._verify(self._last_observations, self._side_maps(maps), self._link)
             if len(self.members) > 1:
@@ -1012,6 +1014,33 @@ class TeamCoordinator:
             f"{self.config.sighting_verify_distance:.1f} m"
         )
         return True
+
+    def _waiting_on_sightings(self) -> bool:
+        """Whether a hypothesis from sightings waits, unmatched, for a chance meeting
+        (nobody is driven for it yet)."""
+        rendezvous = self.rendezvous
+        return (
+            self.state is TeamState.HYPOTHESIS_VERIFICATION
+            and rendezvous is not None
+            and rendezvous.formed_at is not None
+            and rendezvous.in_place
+            and rendezvous.first_match is None
+        )
+
+    def _generate_beside_sightings(self, maps: MapSource) -> None:
+        """While a hypothesis from sightings waits for a chance meeting, the pair's maps
+        are still merged as they grow: hypotheses worth a rendezvous from the merge take
+        its place (it is set aside); without any, it waits on."""
+        waiting, hypotheses = self.rendezvous, self.hypotheses
+        assert waiting is not None
+        if not self._link or not self._generate(self._side_maps(maps)):
+            return
+        if self.rendezvous is None:  # the merge gave nothing to drive for
+            self.rendezvous, self.hypotheses = waiting, hypotheses
+            self.state = TeamState.HYPOTHESIS_VERIFICATION
+            self._decide("the hypothesis from sightings waits on for a later meeting")
+        else:
+            self._decide("the hypothesis from sightings is set aside for the merge's")
 
     def _map_check(self, m0: GridMap, m1: GridMap, transform: FloatArray) -> str | None:
         """Why the maps conflict at ``transform`` (the merge's conflict check, at its
