@@ -350,6 +350,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
         # Where target coverage was reached, and the steps the team last had a merge
         # under way (``until_merged``).
         coverage_step: int | None = None
+        events: list[str] = []  # the team's decisions, "STEP TEXT"
         last_pending = 0
         keep_on = config.until_merged and config.interaction and not config.oracle
         keep_on = keep_on and not config.single
@@ -375,7 +376,8 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                         true_poses[i].append(infos[agent]["true_pose"])
                     if recorder is not None:
                         recorder.set_time(steps, steps * env_config.dt)
-                        for decision in team.pop_decisions():
+                        decisions = team.pop_decisions()
+                        for decision in decisions:
                             recorder.log_event(decision.text)
                             if "rendezvous" in decision.text or "hypothesis #" in decision.text:
                                 recorder.log_text("rendezvous/status", decision.text)
@@ -410,7 +412,8 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                             for i, agent in enumerate(agents):
                                 recorder.log_scalar(f"ate/{agent}", ate(i))
                     else:
-                        team.pop_decisions()
+                        decisions = team.pop_decisions()
+                    events += [f"{decision.step} {decision.text}" for decision in decisions]
                     state = team.state
                     if team.merge_pending:
                         last_pending = steps
@@ -551,6 +554,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                 else round(map_agreement(merged, world_from_maps[0], truth), 4),
                 "collision_steps": {agent: int(collisions[agent]) for agent in agents},
                 "team_state": str(team.state),
+                "decisions": events,
                 "outputs": outputs,
             }
             if recorder is not None:
