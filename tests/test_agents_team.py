@@ -582,3 +582,32 @@ def test_a_window_of_a_map_keeps_its_cells_in_place() -> None:
     wall = near.cell_to_world(np.argwhere(near.occupied))
     assert np.allclose(wall, grid.cell_to_world(np.array([[10, 30]])))
     assert window(grid, [100.0, 100.0], 1.0).unknown.all()
+
+
+def test_the_merge_goes_on_while_a_hypothesis_from_sightings_waits() -> None:
+    starts = ((5.0, 8.0, 0.0), (8.0, 8.2, np.pi))
+    truth = compose(inverse(np.array(starts[0])), np.array(starts[1]))
+    env, team, maps, observations = _in_sight_team(starts)
+    _run_team(env, team, maps, observations, 12)
+    waiting = team.rendezvous
+    assert waiting is not None and waiting.formed_at is not None
+    assert team._waiting_on_sightings()
+
+    def nothing(sides: Any) -> bool:  # a merge with no hypothesis worth a rendezvous
+        team._rest()
+        return True
+
+    team._generate = nothing  # type: ignore[method-assign]
+    team._generate_beside_sightings(maps)
+    assert team.rendezvous is waiting and team.state is TeamState.HYPOTHESIS_VERIFICATION
+
+    def one(sides: Any) -> bool:  # a merge with one
+        team.hypotheses = [truth]
+        team._start_rendezvous(0, sides)
+        return True
+
+    team._generate = one  # type: ignore[method-assign]
+    team.pop_decisions()
+    team._generate_beside_sightings(maps)
+    assert team.rendezvous is not None and team.rendezvous.formed_at is None
+    assert any("set aside for the merge's" in d.text for d in team.pop_decisions())
