@@ -74,8 +74,10 @@ from agents.rendezvous import (
 from agents.robot import DEFAULT_ENV, EnvFigures, build_for_env, check_against_env
 from mrslam_env.config import EnvConfig
 from mrslam_env.geometry import compose, inverse, transform_points
-from mrslam_env.gridmap import GridMap
-from mrslam_env.merge.fuse import fuse_all, fuse_maps, resample_map, warp_map
+from mrslam_env.gridmap import UNKNOWN, GridMap
+from mrslam_env.merge.decide import check_conflict_fraction
+from mrslam_env.merge.dissimilarity import acceptance_index
+from mrslam_env.merge.fuse import at_resolution, fuse_all, fuse_maps, resample_map, warp_map
 from mrslam_env.merge.graph import GraphEdge, JointRefineConfig, alignment_edge, refine_jointly
 from mrslam_env.merge.pipeline import (
     MergeConfig,
@@ -95,6 +97,8 @@ __all__ = [
     "TeamState",
     "distinct_hypotheses",
     "in_plain_sight",
+    "mean_pose",
+    "window",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -165,6 +169,26 @@ class TeamConfig:
     explores again (and seeks again after another ``seek_contact_after`` steps); at
     least until ``seek_contact_after`` steps after it began seeking, as long as its
     partner may need to come back. A robot not back at the place by then gives up."""
+    sighting_count: int = 10
+    """Hypotheses from a chance meeting (design §6): when two robots of different groups
+    with the link up see each other on this many steps (0: never), all within twice as
+    many steps, the relative poses those sightings give (``T = p0 · s · p1⁻¹``, both
+    robots' sightings) are averaged into a hypothesis. Averaged over 10 steps (up to 20
+    sightings) the peer sensor's heading noise (0.05 rad a sighting) falls to about
+    0.7°; the maps' refinement does the rest."""
+    sighting_verify_distance: float = 2.0
+    """A hypothesis from sightings is verified only by sightings made after both robots
+    moved at least this far (m, straight line, each) from where they were when it
+    formed, so that the check tests the maps (and the SLAM drift) between two places,
+    never the sightings that made it."""
+    sighting_wait: int = 300
+    """Steps a hypothesis from sightings waits for such a later meeting while the robots
+    explore on; then both drive to meet at a place at least
+    ``sighting_verify_distance`` from where it formed (the usual rendezvous)."""
+    teammate_memory: int = 50
+    """While coordinating, a teammate's position and target as last received over the
+    link are used for at most this many steps without the link (0: for ever); older,
+    they are dropped (they mislead the split of the frontiers more than they help)."""
     refine_every: int = 0
     """Steps between re-refinements of the transform on the grown maps (0: never, the
     default). The relation between the map frames is a constant, best estimated when it
@@ -174,7 +198,12 @@ class TeamConfig:
     def __post_init__(self) -> None:
         check_fields(
             self,
-            non_negative=("min_map_area", "max_meeting_cost", "sight_margin"),
+            non_negative=(
+                "min_map_area",
+                "max_meeting_cost",
+                "sight_margin",
+                "sighting_verify_distance",
+            ),
             positive=("peer_range",),
             counts=(
                 "max_rendezvous",
@@ -187,7 +216,13 @@ class TeamConfig:
         factor = self.regrow_factor
         ok = isinstance(factor, int | float) and math.isfinite(factor) and factor >= 1
         require(name, "regrow_factor", factor, ok, "a finite number >= 1")
-        for attr in ("refine_every", "seek_contact_after"):
+        for attr in (
+            "refine_every",
+            "seek_contact_after",
+            "sighting_count",
+            "sighting_wait",
+            "teammate_memory",
+        ):
             every = getattr(self, attr)
             ok = isinstance(every, int) and not isinstance(every, bool) and every >= 0
             require(name, attr, every, ok, "an int >= 0")
@@ -267,6 +302,10 @@ class _Rendezvous:
     others_unseen: dict[int, int] = field(default_factory=dict)
     """The same count for each hypothesis still waiting its turn (by index): the drive
     for one hypothesis also tests the others."""
+    formed_at: list[FloatArray] | None = None
+    """A hypothesis from sightings (:attr:`TeamConfig.sighting_count`): where the two
+    robots were (side 0, side 1; their group roots' frames) when it formed; sightings
+    count only once both are ``sighting_verify_distance`` away. None: from the merge."""
 
 
 MapSource = Callable[[int], GridMap]
@@ -448,9 +487,10 @@ class TeamCoordinator:
         self._verified_at: list[FloatArray] = [np.zeros(2) for _ in range(n)]
         """Per robot, its position (own map) when the hypothesis that joined it was
         accepted."""
-        self._shared: dict[tuple[int, int], tuple[FloatArray, FloatArray | None]] = {}
+        self._shared: dict[tuple[int, int], tuple[FloatArray, FloatArray | None, int]] = {}
         """``(i, j)``: robot j's position and target in the common frame as robot i last
-        received them (coordinated exploration)."""
+        received them (coordinated exploration), and the step it received them; dropped
+        after ``teammate_memory`` steps."""
         self._on_goal = [False] * n
         """Per robot, whether the team drives it to a given goal (else its policy acts)."""
         self._assigned: list[FloatArray | None] = [None] * n
@@ -481,6 +521,11 @@ class TeamCoordinator:
         place (None while on its way); None when not seeking."""
         self.seeking_steps = [0] * n
         """Per robot, the steps it spent seeking contact (driving back and waiting)."""
+        self._sightings: dict[tuple[int, int], deque[tuple[int, FloatArray]]] = {}
+        """Per pair of robots (side 0, side 1), the recent steps on which they saw each
+        other, each with the relative pose of their groups' frames it gives."""
+        self.sighting_hypotheses = 0
+        """Hypotheses formed from sightings (:attr:`TeamConfig.sighting_count`)."""
 
     @classmethod
     def for_env(
@@ -575,6 +620,17 @@ class TeamCoordinator:
         pose = np.asarray(pose, dtype=np.float64)
         return pose if self.roots[robot] == robot else compose(self.frames[robot], pose)
 
+    @property
+    def merge_pending(self) -> bool:
+        """Whether a merge is under way or may come soon without the maps growing: maps
+        being merged, a hypothesis under verification, sightings being gathered into
+        one, or a robot seeking contact (``mrslam run``'s ``until_merged`` waits on it)."""
+        if self.state in (TeamState.HYPOTHESIS_GENERATION, TeamState.HYPOTHESIS_VERIFICATION):
+            return True
+        window = 2 * self.config.sighting_count
+        recent = any(t and self.step - t[-1][0] < window for t in self._sightings.values())
+        return recent or any(seeking is not None for seeking in self._seeking)
+
     def pop_decisions(self) -> list[Decision]:
         decisions, self._decisions = self._decisions, []
         return decisions
@@ -614,8 +670,13 @@ class TeamCoordinator:
         self._observe_pair(observations)
         if self.config.interaction:
             self._seek_contact()
-            if self.state in (TeamState.NO_INTERACTION, TeamState.COORDINATED_EXPLORATION):
+            if self.state in (
+                TeamState.NO_INTERACTION,
+                TeamState.COORDINATED_EXPLORATION,
+            ) and not self._maybe_sighting(observations, maps):
                 self._maybe_generate(observations, maps)
+            elif self._waiting_on_sightings():
+                self._generate_beside_sightings(maps)
             if self.state is TeamState.HYPOTHESIS_VERIFICATION:
                 self._verify(self._last_observations, self._side_maps(maps), self._link)
             if len(self.members) > 1:
@@ -864,6 +925,145 @@ class TeamCoordinator:
         self._start_rendezvous(0, sides)
         return True
 
+    def _maybe_sighting(self, observations: list[dict[str, Any]], maps: MapSource) -> bool:
+        """A hypothesis from a chance meeting (:attr:`TeamConfig.sighting_count`): two
+        robots of different groups with the link up that see each other give the relative
+        pose of their groups' frames directly, ``T = p0 · s · p1⁻¹``; averaged over
+        ``sighting_count`` steps of sightings it is refined and checked on the maps
+        (:meth:`_form_from_sightings`). True when one was put to verification."""
+        count = self.config.sighting_count
+        if not count:
+            return False
+        for a, b in self._candidate_pairs():
+            self._set_pair(a, b)
+            side0, side1 = self.pair
+            poses = [self.pose_in_root(r, self._poses[r]) for r in self.pair]
+            estimates = []
+            for me, other in ((side0, side1), (side1, side0)):
+                peer = np.asarray(observations[me]["peer"])[_row(me, other)]
+                if peer[0] < 0.5:
+                    continue
+                seen = sighting_pose(peer[1], peer[2], peer[3])
+                mine, theirs = (poses[0], poses[1]) if me == side0 else (poses[1], poses[0])
+                me_from_other = compose(compose(mine, seen), inverse(theirs))
+                estimates.append(me_from_other if me == side0 else inverse(me_from_other))
+            if not estimates:
+                continue
+            track = self._sightings.setdefault(self.pair, deque(maxlen=count))
+            track.append((self.step, np.array(estimates)))
+            if len(track) < count or self.step - track[0][0] >= 2 * count:
+                continue
+            hypothesis = mean_pose(np.concatenate([e for _, e in track]))
+            track.clear()
+            self._observe_pair(observations)
+            if self._form_from_sightings(hypothesis, self._side_maps(maps), poses):
+                return True
+        return False
+
+    def _form_from_sightings(
+        self, hypothesis: FloatArray, sides: MapSource, poses: list[FloatArray]
+    ) -> bool:
+        """Refine the sightings' ``hypothesis`` on the pair's maps (kept only when the
+        refined placement stays within the rendezvous tolerances and the maps do not
+        conflict there), check the maps agree at it within the peer sensor's range of
+        both robots (the merge's conflict check), and put it to verification: True;
+        False when the maps conflict (rejected)."""
+        m0, m1 = sides(0), sides(1)
+        # Checked where the robots met: the sightings vouch for the maps there; far
+        # from it, either map's SLAM drift may make even the true placement conflict.
+        near0, near1 = (
+            window(m, pose[:2], self.config.peer_range)
+            for m, pose in zip((m0, m1), poses, strict=True)
+        )
+        names = [f"robot_{r}" for r in self.pair]
+        x, y, theta = hypothesis
+        self.hypotheses_tested += 1
+        self.sighting_hypotheses += 1
+        transform, how = hypothesis, "kept as seen"
+        try:
+            refined, _, _ = refine_transform(m0, m1, hypothesis, self.config.merge, rng=self.rng)
+        except MergeInputError:
+            refined = None
+        if (
+            refined is not None
+            and self._within_verified(refined, hypothesis, poses[1][:2])
+            and self._map_check(near0, near1, refined) is None
+        ):
+            transform, how = refined, "refined on the maps"
+        conflict = self._map_check(near0, near1, transform)
+        seen = (
+            f"{names[0]} and {names[1]} saw each other on {self.config.sighting_count} "
+            f"steps: hypothesis x {x:.2f}, y {y:.2f}, theta {theta:.3f}"
+        )
+        if conflict is not None:
+            self._decide(f"{seen}; rejected, the maps conflict there ({conflict})")
+            return False
+        self.hypotheses = [transform]
+        self.rendezvous = _Rendezvous(
+            hypothesis=transform,
+            index=0,
+            meeting_point=poses[0][:2].copy(),
+            started=self.step,
+            last_match=self.step,
+            in_place=True,
+            formed_at=[pose[:2].copy() for pose in poses],
+        )
+        self.state = TeamState.HYPOTHESIS_VERIFICATION
+        self._decide(
+            f"{seen} ({how}); to verify by sightings after both moved "
+            f"{self.config.sighting_verify_distance:.1f} m"
+        )
+        return True
+
+    def _waiting_on_sightings(self) -> bool:
+        """Whether a hypothesis from sightings waits, unmatched, for a chance meeting
+        (nobody is driven for it yet)."""
+        rendezvous = self.rendezvous
+        return (
+            self.state is TeamState.HYPOTHESIS_VERIFICATION
+            and rendezvous is not None
+            and rendezvous.formed_at is not None
+            and rendezvous.in_place
+            and rendezvous.first_match is None
+        )
+
+    def _generate_beside_sightings(self, maps: MapSource) -> None:
+        """While a hypothesis from sightings waits for a chance meeting, the pair's maps
+        are still merged as they grow: hypotheses worth a rendezvous from the merge take
+        its place (it is set aside); without any, it waits on."""
+        waiting, hypotheses = self.rendezvous, self.hypotheses
+        assert waiting is not None
+        if not self._link or not self._generate(self._side_maps(maps)):
+            return
+        if self.rendezvous is None:  # the merge gave nothing to drive for
+            self.rendezvous, self.hypotheses = waiting, hypotheses
+            self.state = TeamState.HYPOTHESIS_VERIFICATION
+            self._decide("the hypothesis from sightings waits on for a later meeting")
+        else:
+            self._decide("the hypothesis from sightings is set aside for the merge's")
+
+    def _map_check(self, m0: GridMap, m1: GridMap, transform: FloatArray) -> str | None:
+        """Why the maps conflict at ``transform`` (the merge's conflict check, at its
+        working resolution), or None."""
+        config = self.config.merge
+        resolution = max(m0.resolution, m1.resolution, config.working_resolution)
+        w0, w1 = at_resolution(m0, resolution), at_resolution(m1, resolution)
+        agreement = acceptance_index(w0, w1, transform)
+        return check_conflict_fraction(agreement, resolution, config)
+
+    def _moved_off(self, rendezvous: _Rendezvous, poses: list[FloatArray]) -> bool:
+        """Whether sightings now test ``rendezvous``: always for a hypothesis from the
+        merge; for one from sightings, once both robots moved
+        ``sighting_verify_distance`` from where it formed."""
+        formed_at = rendezvous.formed_at
+        if formed_at is None:
+            return True
+        distance = self.config.sighting_verify_distance
+        return all(
+            float(np.hypot(*(pose[:2] - at))) >= distance
+            for pose, at in zip(poses, formed_at, strict=True)
+        )
+
     # --- 3: hypothesis verification -----------------------------------------------------------
 
     def _start_rendezvous(self, index: int, maps: MapSource) -> None:
@@ -953,12 +1153,13 @@ class TeamCoordinator:
         return False if seen_free else None
 
     def _meeting_point(
-        self, hypothesis: FloatArray, maps: MapSource
+        self, hypothesis: FloatArray, maps: MapSource, *, avoid: FloatArray | None = None
     ) -> tuple[FloatArray, float] | None:
         """The meeting point (side 0's group frame) and the later arrival's cost, each
         robot's travel planned on the map it drives on (:meth:`_driven_map`): a robot
         outside the common frame drives on its own map, which may not know the places
-        its group's map (the merge's) does."""
+        its group's map (the merge's) does. ``avoid``: points (K, 2, side 0's frame) the
+        meeting point keeps ``sighting_verify_distance + sight_margin`` (m) from."""
         m0 = maps(0)
         planner = self.config.explorer.planner
         costs = []
@@ -973,6 +1174,15 @@ class TeamCoordinator:
                 costs.append(cost)
             else:
                 costs.append(field_on_lattice(cost, grid, m0, side0_from_grid))
+        if avoid is not None:
+            rows, cols = m0.cells.shape
+            centres = m0.cell_to_world(np.indices((rows, cols)).reshape(2, -1).T)
+            near = np.zeros(rows * cols, dtype=bool)
+            # The robots stop short of the point: a margin, so that both are far enough.
+            radius = self.config.sighting_verify_distance + self.config.sight_margin
+            for point in avoid:
+                near |= np.hypot(*(centres - point).T) < radius
+            costs[0] = np.where(near.reshape(rows, cols), np.inf, costs[0])
         return choose_meeting_point(costs[0], costs[1], m0)
 
     def _driven_map(self, side: int, maps: MapSource) -> tuple[GridMap, FloatArray, FloatArray]:
@@ -997,7 +1207,7 @@ class TeamCoordinator:
         config = self.config.rendezvous
         robots = self.pair
         poses = [np.asarray(o["pose"], dtype=np.float64) for o in observations]
-        if link:
+        if link and self._moved_off(rendezvous, poses):
             if rendezvous.previous is not None:
                 rendezvous.motion += sum(
                     float(np.hypot(*(pose[:2] - before[:2])))
@@ -1056,11 +1266,16 @@ class TeamCoordinator:
                 else:
                     rendezvous.unseen = 0
                 self._test_waiting(rendezvous, poses, maps)
+        sighted = rendezvous.formed_at is not None and rendezvous.first_match is None
+        # A hypothesis from sightings waits longer for a later meeting by chance.
+        lost_after = self.config.sighting_wait if sighted else UNSEEN_STEPS
+        # Robots with nothing left to explore would wait for a chance meeting in vain.
+        idle = sighted and all(self.done(r) for r in robots)
         if (
             rendezvous.in_place
             and rendezvous.last_match is not None
-            and self.step - rendezvous.last_match >= UNSEEN_STEPS
-            and self._drive_to_meet(rendezvous, maps)
+            and (self.step - rendezvous.last_match >= lost_after or idle)
+            and self._drive_to_meet(rendezvous, maps, self.step - rendezvous.last_match)
         ):
             return
         if rendezvous.first_match is not None:
@@ -1073,8 +1288,9 @@ class TeamCoordinator:
                 self._release(robots[1])
             return
         if rendezvous.in_place:
-            if self.step - rendezvous.started >= config.wait_steps:
-                self._set_aside(rendezvous, maps, "lost sight of each other")
+            if self.step - rendezvous.started >= config.wait_steps + (lost_after - UNSEEN_STEPS):
+                why = "no meeting point" if sighted else "lost sight of each other"
+                self._set_aside(rendezvous, maps, why)
             return
         stuck = [r for r in robots if self.explorers[r].status == "goal_unreachable"]
         if stuck:
@@ -1102,13 +1318,17 @@ class TeamCoordinator:
         for side, goal in enumerate((point0, point1)):
             self._send(side, goal)
 
-    def _drive_to_meet(self, rendezvous: _Rendezvous, maps: MapSource) -> bool:
+    def _drive_to_meet(self, rendezvous: _Rendezvous, maps: MapSource, unseen: int) -> bool:
         """A hypothesis matched where the robots stood, then they lost sight of each
         other before it was confirmed (exploring on, they part): both drive to its
         meeting point, and the confirmation goes on there as at any rendezvous. False
         (nothing changed) when no meeting point is within ``max_meeting_cost``."""
         hypothesis = rendezvous.hypothesis
-        meeting = self._meeting_point(hypothesis, maps)
+        avoid = None
+        if rendezvous.formed_at is not None:  # meet where the sightings test the maps
+            at0, at1 = rendezvous.formed_at
+            avoid = np.array([at0, transform_points(hypothesis, at1[None, :])[0]])
+        meeting = self._meeting_point(hypothesis, maps, avoid=avoid)
         if meeting is None or meeting[1] > self.config.max_meeting_cost:
             return False
         point0, cost = meeting
@@ -1119,7 +1339,7 @@ class TeamCoordinator:
         if rendezvous.first_match is not None:
             rendezvous.first_match = self.step  # a full window to confirm at the meeting
         self._decide(
-            f"hypothesis #{rendezvous.index}: out of sight for {UNSEEN_STEPS} steps before "
+            f"hypothesis #{rendezvous.index}: no sighting for {unseen} steps before "
             f"it was confirmed; both drive to meet at ({point0[0]:.2f}, {point0[1]:.2f}), "
             f"later arrival after ~{cost:.1f} m"
         )
@@ -1310,7 +1530,10 @@ class TeamCoordinator:
 
     def _reject(self, rendezvous: _Rendezvous, maps: MapSource, why: str) -> None:
         self._decide(f"hypothesis #{rendezvous.index} rejected: {why}")
-        self.rejected.append(rendezvous.hypothesis)
+        if rendezvous.formed_at is None:
+            # One from sightings says nothing about the maps' other placements: it is
+            # not kept among the rejected, which would hide a merge's answer close to it.
+            self.rejected.append(rendezvous.hypothesis)
         self.rendezvous = None
         self._release_pair()
         self._start_rendezvous(rendezvous.index + 1, maps)
@@ -1410,10 +1633,18 @@ class TeamCoordinator:
                 continue
             # In turn, so that a robot sees the targets the robots before it pick on this
             # very step; a teammate's pose and target are known only as last received.
+            memory = self.config.teammate_memory
             for j in members:
                 if j != i and self._reach[i, j]:
-                    self._shared[(i, j)] = (poses[j][:2].copy(), self._target_of(j))
-            known = [(j, *self._shared[(i, j)]) for j in members if (i, j) in self._shared]
+                    self._shared[(i, j)] = (poses[j][:2].copy(), self._target_of(j), self.step)
+                elif memory and self.step - self._shared.get((i, j), (0, 0, self.step))[2] > memory:
+                    del self._shared[(i, j)]  # too old to trust
+            known = [
+                (j, position, target)
+                for j in members
+                if (i, j) in self._shared
+                for position, target, _ in (self._shared[(i, j)],)
+            ]
             mine = self._target_of(i)
             replan = getattr(policy, "request_replan", None)
             radius = getattr(policy, "shared_target_radius", self.config.explorer.separation / 4)
@@ -1496,3 +1727,24 @@ def _points(points: Any) -> FloatArray:
 
 def _no_map(robot: int) -> GridMap:
     raise RuntimeError("the team has not acted yet: no maps")
+
+
+def mean_pose(poses: ArrayLike) -> FloatArray:
+    """The mean of poses (K, 3): positions averaged, headings by their unit vectors."""
+    array = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    heading = math.atan2(float(np.sin(array[:, 2]).mean()), float(np.cos(array[:, 2]).mean()))
+    return np.array([array[:, 0].mean(), array[:, 1].mean(), heading])
+
+
+def window(grid: GridMap, point: ArrayLike, radius: float) -> GridMap:
+    """The square of ``grid`` within ``radius`` (m) of ``point`` (its frame), clipped to
+    the grid (one unknown cell when the point is outside it)."""
+    row, col = grid.world_to_cell(np.asarray(point, dtype=np.float64)[None, :2])[0]
+    reach = math.ceil(radius / grid.resolution)
+    rows, cols = grid.shape
+    r0, r1 = max(row - reach, 0), min(row + reach + 1, rows)
+    c0, c1 = max(col - reach, 0), min(col + reach + 1, cols)
+    if r0 >= r1 or c0 >= c1:
+        return GridMap(cells=np.full((1, 1), UNKNOWN, dtype=np.int8), resolution=grid.resolution)
+    origin = (grid.origin[0] + c0 * grid.resolution, grid.origin[1] + r0 * grid.resolution)
+    return GridMap(cells=grid.cells[r0:r1, c0:c1].copy(), resolution=grid.resolution, origin=origin)

@@ -162,6 +162,16 @@ class RunConfig:
     :func:`agents.policy.load_policy_factory`); None: the frontier explorer."""
     target_coverage: float = 0.95
     """Stop once the robots' maps together cover this fraction of the free area."""
+    until_merged: bool = True
+    """A team run (interaction, not oracle, not single) that reaches ``target_coverage``
+    (or whose robots have nothing left to explore) before every robot joined robot 0's
+    frame runs on until they did, until the team has had no merge under way
+    (:attr:`agents.team.TeamCoordinator.merge_pending`) for ``until_merged_idle`` steps,
+    or until ``max_steps``: the team's product is a merged map. ``t90`` means the same
+    either way; the report gives ``coverage_step`` and ``steps_after_coverage``."""
+    until_merged_idle: int = 300
+    """Steps without a merge under way after which a run kept on by ``until_merged``
+    stops (the hypotheses have run out)."""
     coverage_every: int = 20
     """Steps between coverage evaluations."""
     progress: bool = True
@@ -172,7 +182,7 @@ class RunConfig:
     def __post_init__(self) -> None:
         if self.max_steps < 1:
             raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
-        for name in ("scan_every", "map_every", "coverage_every"):
+        for name in ("scan_every", "map_every", "coverage_every", "until_merged_idle"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if not 0 < self.target_coverage <= 1:
@@ -337,6 +347,13 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
         state = team.state
         coverage_curve: list[tuple[int, float]] = []
         t90: float | None = None
+        # Where target coverage was reached, and the steps the team last had a merge
+        # under way (``until_merged``).
+        coverage_step: int | None = None
+        events: list[str] = []  # the team's decisions, "STEP TEXT"
+        last_pending = 0
+        keep_on = config.until_merged and config.interaction and not config.oracle
+        keep_on = keep_on and not config.single
         steps = 0
         interrupted: str | None = None
         started = time.perf_counter()
@@ -359,7 +376,8 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                         true_poses[i].append(infos[agent]["true_pose"])
                     if recorder is not None:
                         recorder.set_time(steps, steps * env_config.dt)
-                        for decision in team.pop_decisions():
+                        decisions = team.pop_decisions()
+                        for decision in decisions:
                             recorder.log_event(decision.text)
                             if "rendezvous" in decision.text or "hypothesis #" in decision.text:
                                 recorder.log_text("rendezvous/status", decision.text)
@@ -394,8 +412,11 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                             for i, agent in enumerate(agents):
                                 recorder.log_scalar(f"ate/{agent}", ate(i))
                     else:
-                        team.pop_decisions()
+                        decisions = team.pop_decisions()
+                    events += [f"{decision.step} {decision.text}" for decision in decisions]
                     state = team.state
+                    if team.merge_pending:
+                        last_pending = steps
                     if steps % config.coverage_every == 0 or not env.agents:
                         covered = evaluator.coverage(
                             [maps(i) for i in counted], [world_from_maps[i] for i in counted]
@@ -405,10 +426,14 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                             recorder.log_scalar("coverage/team", covered)
                         if t90 is None and covered >= 0.9:
                             t90 = steps * env_config.dt
-                        if covered >= config.target_coverage:
-                            break
-                        if all(team.done(i) for i in counted):
-                            break
+                        finished = covered >= config.target_coverage
+                        if finished or all(team.done(i) for i in counted):
+                            if coverage_step is None:
+                                coverage_step = steps
+                            all_joined = len(team.members) == len(agents)
+                            waited = steps - max(last_pending, coverage_step)
+                            if not keep_on or all_joined or waited >= config.until_merged_idle:
+                                break
         except KeyboardInterrupt as stop:  # Ctrl-C or a signal: keep what was done
             interrupted = getattr(stop, "signal_name", "SIGINT")
         with _signals_deferred():  # the outputs of the steps done are written whole
@@ -511,6 +536,9 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                 "merge": merge_report,
                 "coverage": coverage,
                 "t90": None if t90 is None else round(t90, 3),
+                "until_merged": keep_on,
+                "coverage_step": coverage_step,
+                "steps_after_coverage": 0 if coverage_step is None else steps - coverage_step,
                 "coverage_curve": [[s, round(c, 4)] for s, c in coverage_curve],
                 "slam": {
                     agent: {
@@ -526,6 +554,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                 else round(map_agreement(merged, world_from_maps[0], truth), 4),
                 "collision_steps": {agent: int(collisions[agent]) for agent in agents},
                 "team_state": str(team.state),
+                "decisions": events,
                 "outputs": outputs,
             }
             if recorder is not None:

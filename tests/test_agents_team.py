@@ -16,6 +16,8 @@ from agents.team import (
     _Rendezvous,
     distinct_hypotheses,
     in_plain_sight,
+    mean_pose,
+    window,
 )
 from mrslam_env.config import EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
@@ -408,6 +410,7 @@ def test_a_match_where_they_stand_lost_from_sight_is_confirmed_at_a_meeting() ->
         actions = team.act(blind, maps)
         observations, *_ = env.step({a: actions[i] for i, a in enumerate(agents)})
     decisions = [d.text for d in team.pop_decisions()]
+    assert any(f"no sighting for {UNSEEN_STEPS} steps" in d for d in decisions), decisions
     assert any("both drive to meet" in d for d in decisions), decisions
     assert team.rendezvous is not None and not team.rendezvous.in_place
     assert all(team._on_goal)
@@ -417,3 +420,194 @@ def test_a_match_where_they_stand_lost_from_sight_is_confirmed_at_a_meeting() ->
     assert team.transform is not None
     error = compose(inverse(truth), team.transform)
     assert np.hypot(error[0], error[1]) < 0.1 and abs(error[2]) < np.radians(1.0)
+
+
+def _run_team(
+    env: MultiRobotSlamEnv,
+    team: TeamCoordinator,
+    maps: MapCache,
+    observations: dict[str, Any],
+    steps: int,
+    *,
+    seen: Any = None,
+) -> tuple[list[str], list[list[np.ndarray]], dict[str, Any]]:
+    """Step the env under the team for ``steps`` steps or until it coordinates; the
+    decisions, each step's SLAM poses (robot 0, robot 1) and the last observations.
+    ``seen(step, observations)`` may change what the team is given."""
+    agents = env.possible_agents
+    decisions: list[str] = []
+    poses: list[list[np.ndarray]] = []
+    for step in range(steps):
+        given = [observations[a] for a in agents]
+        if seen is not None:
+            given = seen(step, given)
+        actions = team.act(given, maps)
+        observations, *_ = env.step({a: actions[i] for i, a in enumerate(agents)})
+        decisions += [f"{d.step} {d.text}" for d in team.pop_decisions()]
+        poses.append([np.asarray(observations[a]["pose"], dtype=np.float64) for a in agents])
+        if team.state is TeamState.COORDINATED_EXPLORATION:
+            break
+    return decisions, poses, observations
+
+
+def test_a_chance_meeting_makes_a_hypothesis_verified_by_a_later_meeting() -> None:
+    # 3 m apart in the corridor, facing each other: the peer sensor sees at once, and no
+    # merge is tried (the test is of the sightings alone).
+    starts = ((5.0, 8.0, 0.0), (8.0, 8.2, np.pi))
+    truth = compose(inverse(np.array(starts[0])), np.array(starts[1]))
+    env, team, maps, observations = _in_sight_team(starts)
+    formed: list[np.ndarray] = []
+    accepted_at: list[list[np.ndarray]] = []
+
+    def watch(step: int, given: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        rendezvous = team.rendezvous
+        if rendezvous is not None and rendezvous.formed_at is not None and not formed:
+            formed.extend(rendezvous.formed_at)
+        accepted_at[:] = [[np.asarray(o["pose"], dtype=np.float64) for o in given]]
+        return given
+
+    decisions, _, _ = _run_team(env, team, maps, observations, 900, seen=watch)
+    assert team.sighting_hypotheses >= 1, decisions
+    assert any("saw each other on 10 steps" in d for d in decisions), decisions
+    assert team.state is TeamState.COORDINATED_EXPLORATION, decisions
+    assert team.transform is not None
+    error = compose(inverse(truth), team.transform)
+    assert np.hypot(error[0], error[1]) < 0.1 and abs(error[2]) < np.radians(1.0)
+    # Verified from other places: both robots had moved the distance since it formed.
+    distance = team.config.sighting_verify_distance
+    assert len(formed) == 2
+    for pose, at in zip(accepted_at[0], formed, strict=True):
+        assert np.hypot(*(pose[:2] - at)) >= distance
+
+
+def test_a_wrong_hypothesis_from_sightings_is_rejected() -> None:
+    # The sightings that make the hypothesis are off by 0.5 rad of bearing (a wrong
+    # hypothesis, about 1.5 m off at the other robot); later sightings are true.
+    starts = ((5.0, 8.0, 0.0), (8.0, 8.2, np.pi))
+    env, team, maps, observations = _in_sight_team(starts)
+
+    def skewed(step: int, given: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        if team.sighting_hypotheses:
+            return given
+        out = []
+        for o in given:
+            peer = np.array(o["peer"], dtype=np.float64)
+            peer[:, 2] += 0.5
+            out.append({**o, "peer": peer})
+        return out
+
+    decisions, _, _ = _run_team(env, team, maps, observations, 500, seen=skewed)
+    assert team.sighting_hypotheses >= 1, decisions
+    assert any("rejected" in d for d in decisions), decisions
+    first = next(i for i, d in enumerate(decisions) if "saw each other" in d)
+    verdict = next(d for d in decisions[first:] if "rejected" in d or "accepted" in d)
+    assert "rejected" in verdict, decisions
+    # A rejected hypothesis from sightings is not kept among the rejected (the merge's
+    # answers near it stay open).
+    assert team.rejected == []
+
+
+def test_a_hypothesis_from_sightings_whose_maps_conflict_is_rejected_at_once() -> None:
+    starts = ((5.0, 8.0, 0.0), (8.0, 8.2, np.pi))
+    truth = compose(inverse(np.array(starts[0])), np.array(starts[1]))
+    env, team, maps, observations = _in_sight_team(starts)
+    for _ in range(30):  # map a little more, no sightings turned into a hypothesis
+        blind = [
+            {**observations[a], "peer": np.zeros_like(observations[a]["peer"])}
+            for a in env.possible_agents
+        ]
+        actions = team.act(blind, maps)
+        observations, *_ = env.step({a: actions[i] for i, a in enumerate(env.possible_agents)})
+    sides = team._side_maps(maps)
+    poses = [team.pose_in_root(r, team._poses[r]) for r in team.pair]
+    assert team._map_check(sides(0), sides(1), truth) is None
+    turned = compose(truth, [0.0, 0.0, np.pi / 2])
+    assert team._map_check(sides(0), sides(1), turned) is not None
+    team.pop_decisions()
+    assert not team._form_from_sightings(turned, sides, poses)
+    assert team.rendezvous is None and team.state is TeamState.NO_INTERACTION
+    assert any("the maps conflict" in d.text for d in team.pop_decisions())
+
+
+def test_mean_pose_averages_headings_across_the_wrap() -> None:
+    mean = mean_pose([[1.0, 0.0, np.pi - 0.1], [3.0, 2.0, -np.pi + 0.1]])
+    assert np.allclose(mean[:2], [2.0, 1.0])
+    assert abs(abs(mean[2]) - np.pi) < 1e-9
+
+
+def test_a_teammate_unheard_for_long_is_forgotten() -> None:
+    starts = ((5.0, 8.0, 0.0), (8.0, 8.2, np.pi))
+    truth = compose(inverse(np.array(starts[0])), np.array(starts[1]))
+    env, team, maps, observations = _in_sight_team(starts)
+    agents = env.possible_agents
+    team.start_coordinated(truth, maps)
+    memory = team.config.teammate_memory
+    for step in range(memory + 2):
+        given = [observations[a] for a in agents]
+        if step > 0:  # the link down from the second step on
+            given = [{**o, "comm": np.zeros_like(o["comm"])} for o in given]
+        actions = team.act(given, maps)
+        observations, *_ = env.step({a: actions[i] for i, a in enumerate(agents)})
+        if step == memory:
+            assert (0, 1) in team._shared  # held for ``teammate_memory`` steps
+    assert (0, 1) not in team._shared and (1, 0) not in team._shared
+
+
+def test_a_hypothesis_from_sightings_is_rejected_when_slam_drifts_between_meetings() -> None:
+    # After the hypothesis formed, robot 1's pose as the team receives it is 1 m off (its
+    # SLAM jumped): the later sightings, from other places, contradict the hypothesis.
+    starts = ((5.0, 8.0, 0.0), (8.0, 8.2, np.pi))
+    env, team, maps, observations = _in_sight_team(starts)
+
+    def drifted(step: int, given: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        if not team.sighting_hypotheses:
+            return given
+        pose = np.asarray(given[1]["pose"], dtype=np.float64) + np.array([0.0, 1.0, 0.0])
+        return [given[0], {**given[1], "pose": pose}]
+
+    decisions, _, _ = _run_team(env, team, maps, observations, 500, seen=drifted)
+    formed = [i for i, d in enumerate(decisions) if "to verify by sightings" in d]
+    assert formed, decisions
+    verdict = next(d for d in decisions[formed[0] :] if "rejected" in d or "accepted" in d)
+    assert "hypothesis #0 rejected" in verdict, decisions
+    assert team.rejected == []  # not kept: the merge's answers near it stay open
+
+
+def test_a_window_of_a_map_keeps_its_cells_in_place() -> None:
+    cells = np.full((40, 60), FREE, dtype=np.int8)
+    cells[10, 30] = OCCUPIED
+    grid = GridMap(cells=cells, resolution=0.1, origin=(-1.0, 2.0))
+    near = window(grid, [2.05, 3.05], 0.5)  # cell (10, 30) at the centre
+    assert near.shape == (11, 11)
+    wall = near.cell_to_world(np.argwhere(near.occupied))
+    assert np.allclose(wall, grid.cell_to_world(np.array([[10, 30]])))
+    assert window(grid, [100.0, 100.0], 1.0).unknown.all()
+
+
+def test_the_merge_goes_on_while_a_hypothesis_from_sightings_waits() -> None:
+    starts = ((5.0, 8.0, 0.0), (8.0, 8.2, np.pi))
+    truth = compose(inverse(np.array(starts[0])), np.array(starts[1]))
+    env, team, maps, observations = _in_sight_team(starts)
+    _run_team(env, team, maps, observations, 12)
+    waiting = team.rendezvous
+    assert waiting is not None and waiting.formed_at is not None
+    assert team._waiting_on_sightings()
+
+    def nothing(sides: Any) -> bool:  # a merge with no hypothesis worth a rendezvous
+        team._rest()
+        return True
+
+    team._generate = nothing  # type: ignore[method-assign]
+    team._generate_beside_sightings(maps)
+    assert team.rendezvous is waiting and team.state is TeamState.HYPOTHESIS_VERIFICATION
+
+    def one(sides: Any) -> bool:  # a merge with one
+        team.hypotheses = [truth]
+        team._start_rendezvous(0, sides)
+        return True
+
+    team._generate = one  # type: ignore[method-assign]
+    team.pop_decisions()
+    team._generate_beside_sightings(maps)
+    assert team.rendezvous is not None and team.rendezvous.formed_at is None
+    assert any("set aside for the merge's" in d.text for d in team.pop_decisions())

@@ -180,3 +180,30 @@ def test_cli_selects_modes(capsys: pytest.CaptureFixture[str]) -> None:
     assert main([*argv, "--modes", "oracle,single", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert [run["mode"] for run in result["runs"]] == ["oracle", "single"]
+
+
+def test_a_team_run_goes_on_after_coverage_until_its_merge_is_verified(tmp_path: Path) -> None:
+    # tb3_sandbox seed 0 reaches 95 % at step 40, before any merge is verified.
+    stopped = run_experiment(_config(tmp_path, max_steps=400, until_merged=False, name="a"))
+    assert stopped["steps"] == 40 and stopped["coverage_step"] == 40
+    assert not stopped["merge"]["verified"] and stopped["steps_after_coverage"] == 0
+    went_on = run_experiment(_config(tmp_path, max_steps=400, name="b"))
+    merge = went_on["merge"]
+    assert went_on["until_merged"] and merge["verified"]
+    assert went_on["coverage_step"] == 40 and went_on["t90"] == stopped["t90"]
+    # Stopped at the first coverage check after the merge was verified.
+    assert merge["step_verified"] <= went_on["steps"] < merge["step_verified"] + 20
+    assert went_on["steps_after_coverage"] == went_on["steps"] - 40
+    assert not is_wrong(merge["translation_error"], merge["rotation_error"])
+
+
+def test_a_team_run_with_no_merge_under_way_stops_after_the_idle_steps(tmp_path: Path) -> None:
+    # No link: no merge can ever be under way, so the run stops ``until_merged_idle``
+    # steps after its coverage; a run without interaction is never kept on.
+    alone = run_experiment(_config(tmp_path, max_steps=400, comm=False, until_merged_idle=60))
+    assert alone["coverage_step"] == 40 and alone["steps"] == 100
+    assert not alone["merge"]["verified"]
+    independent = run_experiment(_config(tmp_path, max_steps=400, interaction=False))
+    assert not independent["until_merged"] and independent["steps"] == 40
+    with pytest.raises(ValueError, match="until_merged_idle"):
+        _config(tmp_path, until_merged_idle=0)

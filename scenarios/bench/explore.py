@@ -26,7 +26,9 @@ Reported per scenario:
                            (None when the oracle gains nothing)
 ``faster``                 team runs that reached 90 % sooner than the same seed's
                            independent run
-``verified``               team runs with a verified merge / team runs
+``verified``               team runs with a verified merge (at any time, also after
+                           the run's target coverage: ``RunConfig.until_merged``) /
+                           team runs
 ``wrong_accepted``         verified merges off by more than 0.10 m or 1° (must be 0)
 ``translation_error``      median, p90 and max translation error (m) of the verified
                            merges; ``rotation_error`` the same in degrees
@@ -34,6 +36,8 @@ Reported per scenario:
                            covered 90 % (or verified it in a run that never did)
 ``seeking_steps``          robot-steps the team runs spent seeking contact (driving
                            back to the place of the last link and waiting there)
+``steps_after_coverage``   steps the team runs went on after reaching their target
+                           coverage without a verified merge (``until_merged``)
 ``collisions[mode]``       collision steps per run (summed over the moving robots):
                            median, max, and the median as % of the moving robots' steps
 =========================  ==========================================================
@@ -195,6 +199,7 @@ def run_row(report: dict[str, Any]) -> dict[str, Any]:
         "step_verified": merge["step_verified"],
         "verified_before_t90": _verified_before_t90(report),
         "seeking_steps": merge.get("seeking_steps", 0),
+        "steps_after_coverage": report.get("steps_after_coverage", 0),
         "coverage": report["coverage"]["merged"],
         "steps": report["steps"],
         "collision_steps": sum(collisions[agent] for agent in moving),
@@ -416,6 +421,7 @@ def _summarise(
         "hypotheses_tested": sum(r["hypotheses_tested"] for r in team),
         "verified_before_t90": sum(r.get("verified_before_t90", False) for r in team),
         "seeking_steps": sum(r.get("seeking_steps", 0) for r in team),
+        "steps_after_coverage": sum(r.get("steps_after_coverage", 0) for r in team),
         "collisions": collisions,
     }
 
@@ -442,12 +448,12 @@ def format_explore_table(rows: Sequence[dict[str, Any]]) -> str:
         "speed-up indep/team | share of oracle gain | faster | verified | wrong accepted | "
         "error m med / p90 / max | error ° med / p90 / max | "
         "collision steps team med / max (% steps) | hypotheses tested | "
-        "verified before t90 | contact seeking (robot-steps) |",
+        "verified before t90 | contact seeking (robot-steps) | steps after coverage |",
         "| --- | "
         + ("--- | " if by_policy else "")
         + ("---: | ---: | " if by_size else "")
         + "---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
-        "| ---: | ---: | ---: | ---: |",
+        "| ---: | ---: | ---: | ---: | ---: |",
     ]
     for row in rows:
         translation, rotation = row["translation_error"], row["rotation_error"]
@@ -473,6 +479,6 @@ def format_explore_table(rows: Sequence[dict[str, Any]]) -> str:
             f"{row['faster']}/{row['runs']} | {row['verified']}/{row['runs']} | "
             f"{row['wrong_accepted']} | {t_error} | {r_error} | {collisions} | "
             f"{row['hypotheses_tested']} | {row.get('verified_before_t90', 0)}/{row['runs']} | "
-            f"{row.get('seeking_steps', 0)} |"
+            f"{row.get('seeking_steps', 0)} | {row.get('steps_after_coverage', 0)} |"
         )
     return "\n".join(lines)
