@@ -91,6 +91,11 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--no-comm", action="store_true", help="the radio link never comes up")
     run.add_argument(
+        "--stop-at-coverage",
+        action="store_true",
+        help="stop at the target coverage even if the team has not merged its maps yet",
+    )
+    run.add_argument(
         "--policy",
         metavar="MODULE:FACTORY",
         help="the robots' exploration policy: factory(env, rng) in an importable module or a "
@@ -319,6 +324,7 @@ def _run(args: argparse.Namespace) -> int:
         record=not args.no_record,
         interaction=not args.independent,
         comm=not args.no_comm,
+        until_merged=not args.stop_at_coverage,
         policy=args.policy,
         robots=args.robots,
         progress=not args.json,

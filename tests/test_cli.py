@@ -178,6 +178,15 @@ def test_run_from_a_map_file(capsys, tmp_path) -> None:
     assert json.loads(out)["scenario"] == "map:m.yaml"
 
 
+@pytest.mark.parametrize(("flags", "until_merged"), [((), True), (("--stop-at-coverage",), False)])
+def test_run_keeps_going_until_merged_unless_told(capsys, tmp_path, flags, until_merged) -> None:
+    status, out, _ = run_cli(
+        capsys, "run", *flags, "--max-steps", "5", "--out", str(tmp_path), "--no-record", "--json"
+    )
+    assert status == 0
+    assert json.loads(out)["until_merged"] is until_merged
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
