@@ -421,6 +421,9 @@ class TeamCoordinator:
             raise ValueError(f"a team needs n_robots >= 2, got {n_robots!r}")
         self.config = config if config is not None else TeamConfig()
         self.rng = rng
+        # Sighting hypotheses are refined with a generator of their own, so that one formed
+        # (and perhaps set aside) does not shift the draws of the merges and explorers.
+        self._sighting_rng = rng.spawn(1)[0]
         self.n_robots = n_robots
         self.policies: list[ExplorationPolicy] = []
         self.explorers: list[ExplorerPolicy] = []
@@ -981,7 +984,9 @@ class TeamCoordinator:
         self.sighting_hypotheses += 1
         transform, how = hypothesis, "kept as seen"
         try:
-            refined, _, _ = refine_transform(m0, m1, hypothesis, self.config.merge, rng=self.rng)
+            refined, _, _ = refine_transform(
+                m0, m1, hypothesis, self.config.merge, rng=self._sighting_rng
+            )
         except MergeInputError:
             refined = None
         if (
