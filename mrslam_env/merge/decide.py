@@ -319,9 +319,17 @@ def settled(
     """
     if best.fine_walls is None or rival.fine_walls is None:
         return False
-    if placed_apart(best.map1_from_map2, rival.map1_from_map2, pivot) >= config.settle_distance:
+    if not same_part(best, rival, pivot, config):
         return False
     return rival.fine_walls.missed >= config.settle_ratio * best.fine_walls.missed
+
+
+def same_part(
+    best: ScoredHypothesis, rival: ScoredHypothesis, pivot: FloatArray, config: MergeConfig
+) -> bool:
+    """Whether ``rival`` places the same part of the maps as ``best``: it puts ``pivot``
+    within ``settle_distance`` of where ``best`` puts it (turned by any angle)."""
+    return placed_apart(best.map1_from_map2, rival.map1_from_map2, pivot) < config.settle_distance
 
 
 def ambiguous_rival(

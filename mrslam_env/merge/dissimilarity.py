@@ -883,19 +883,14 @@ class WallMatch:
         m1's OCCUPIED cells that land on a known cell of m2.
     matched1 : int
         Those of ``walls1`` with an OCCUPIED cell of m2 within ``near_cells`` (L1).
-    conflicts1 : int
-        Those of ``walls1`` that land on a FREE cell of m2 with no OCCUPIED cell of m2
-        within ``tolerance_cells``: m1's wall across m2's open floor.
-    walls2, matched2, conflicts2 : int
+    walls2, matched2 : int
         The same for m2's walls against m1.
     """
 
     walls1: int
     matched1: int
-    conflicts1: int
     walls2: int
     matched2: int
-    conflicts2: int
 
     @property
     def missed(self) -> float:
@@ -909,11 +904,6 @@ class WallMatch:
             (self.walls2 - self.matched2 + 1) / (self.walls2 + 1),
         )
 
-    @property
-    def conflicts(self) -> int:
-        """Wall cells of either map across open floor of the other."""
-        return self.conflicts1 + self.conflicts2
-
 
 def _walls_against(
     source: GridMap,
@@ -921,21 +911,15 @@ def _walls_against(
     target_from_source: NDArray[np.float64],
     target_distances: DistanceMaps,
     near_cells: int,
-    tolerance_cells: int,
-) -> tuple[int, int, int]:
-    """``source``'s walls on known cells of ``target``: how many, how many matched, how
-    many in conflict (see :class:`WallMatch`)."""
+) -> tuple[int, int]:
+    """``source``'s walls on known cells of ``target``: how many, and how many matched
+    (see :class:`WallMatch`)."""
     walls = np.argwhere(source.cells == OCCUPIED)
     landed = target.world_to_cell(transform_points(target_from_source, source.cell_to_world(walls)))
     landed = landed[target.contains(landed)]
     landed = landed[target_distances.known[landed[:, 0], landed[:, 1]]]
     to_wall = target_distances.occupied[landed[:, 0], landed[:, 1]]
-    on_floor = target.cells[landed[:, 0], landed[:, 1]] == FREE
-    return (
-        len(landed),
-        int(np.count_nonzero(to_wall <= near_cells)),
-        int(np.count_nonzero(on_floor & (to_wall > tolerance_cells))),
-    )
+    return len(landed), int(np.count_nonzero(to_wall <= near_cells))
 
 
 def wall_match(
@@ -944,7 +928,6 @@ def wall_match(
     map1_from_map2: ArrayLike,
     *,
     near_cells: int = 1,
-    tolerance_cells: int = 2,
     distances1: DistanceMaps | None = None,
     distances2: DistanceMaps | None = None,
 ) -> WallMatch:
@@ -953,38 +936,25 @@ def wall_match(
     Unlike :func:`acceptance_index`, which compares m1's cells with m2's cell by cell (a
     wall two cells thick in m1 and one in m2 leaves a cell of "disagreement"), this
     counts from the walls, in both directions, with the distance maps: a wall cell is
-    matched when the other map has a wall within ``near_cells`` of it, and in conflict
-    when it lies on the other map's open floor with no wall within ``tolerance_cells``.
+    matched when the other map has a wall within ``near_cells`` of it.
 
     Raises
     ------
     ValueError
         Different resolutions, a map without a known cell, a non-finite transform, or a
-        negative cell count.
+        negative ``near_cells``.
     """
     transform = check_transform(map1_from_map2)
     check_same_resolution(m1, m2)
     _check_has_known(m1, "map 1")
     _check_has_known(m2, "map 2")
-    for name, value in (("near_cells", near_cells), ("tolerance_cells", tolerance_cells)):
-        if not (isinstance(value, int) and value >= 0):
-            raise ValueError(f"{name} must be an int >= 0, got {value!r}")
+    if not (isinstance(near_cells, int) and near_cells >= 0):
+        raise ValueError(f"near_cells must be an int >= 0, got {near_cells!r}")
     d1 = _checked_distances(m1, distances1, "distances1")
     d2 = _checked_distances(m2, distances2, "distances2")
-    walls1, matched1, conflicts1 = _walls_against(
-        m1, m2, inverse(transform), d2, near_cells, tolerance_cells
-    )
-    walls2, matched2, conflicts2 = _walls_against(
-        m2, m1, transform, d1, near_cells, tolerance_cells
-    )
-    return WallMatch(
-        walls1=walls1,
-        matched1=matched1,
-        conflicts1=conflicts1,
-        walls2=walls2,
-        matched2=matched2,
-        conflicts2=conflicts2,
-    )
+    walls1, matched1 = _walls_against(m1, m2, inverse(transform), d2, near_cells)
+    walls2, matched2 = _walls_against(m2, m1, transform, d1, near_cells)
+    return WallMatch(walls1=walls1, matched1=matched1, walls2=walls2, matched2=matched2)
 
 
 def _checked_overlap(

@@ -41,9 +41,9 @@ from mrslam_env.merge.decide import (
     ambiguous_rivals,
     decide,
     judge,
-    placed_apart,
     refute,
     same_answer,
+    same_part,
     unsettled_rival,
 )
 from mrslam_env.merge.dissimilarity import (
@@ -388,9 +388,6 @@ class ScoredHypothesis:
         (:attr:`MergeConfig.settle`): its walls against the other map's there, after a
         short refinement (:func:`~mrslam_env.merge.dissimilarity.wall_match`); None
         otherwise.
-    fine_transform : ndarray, shape (3,), or None
-        The transform of that re-judging (refined at the input resolution); None when not
-        re-judged.
     """
 
     map1_from_map2: FloatArray
@@ -405,7 +402,6 @@ class ScoredHypothesis:
     refuted: bool = False
     proposed_by: str = "virtual robot"
     fine_walls: WallMatch | None = None
-    fine_transform: FloatArray | None = None
 
     @property
     def acceptance_index(self) -> float:
@@ -876,8 +872,7 @@ def _refine_final(
 ) -> tuple[FloatArray, float, Agreement]:
     """The accepted transform refined once more at the finer input resolution, when it is
     finer than the working one; otherwise as judged. Transform, psi, agreement."""
-    fine = min(m1.resolution, m2.resolution)
-    if fine < work.resolution * (1.0 - 1e-9):
+    if _input_is_finer(m1, m2, work):
         return _refine_at_input_resolution(m1, m2, chosen.map1_from_map2, config, rng)
     psi = dissimilarity(
         work.w1, work.w2, chosen.map1_from_map2, distances1=work.d1, distances2=work.d2
@@ -903,24 +898,17 @@ def _settle(
     another part of the maps, ``settle_distance`` or more away, which is never settled)
     they come back unchanged."""
     hypotheses = candidates.hypotheses
-    fine = min(m1.resolution, m2.resolution)
     if (
         not config.settle
         or not hypotheses
         or not hypotheses[0].confident
-        or fine >= work.resolution * (1.0 - 1e-9)
+        or not _input_is_finer(m1, m2, work)
     ):
         return candidates
     rivals = ambiguous_rivals(hypotheses, candidates.pivot, config)
-    best = hypotheses[0].map1_from_map2
-    if not rivals or any(
-        placed_apart(best, r.map1_from_map2, candidates.pivot) >= config.settle_distance
-        for r in rivals
-    ):
+    if not rivals or not all(same_part(hypotheses[0], r, candidates.pivot, config) for r in rivals):
         return candidates  # no rival, or one the input resolution cannot settle
-    f1, f2 = at_resolution(m1, fine), at_resolution(m2, fine)
-    sides = config.settle_walk.dissimilarity.wall_sides
-    d1, d2 = distance_maps(f1, sides=sides), distance_maps(f2, sides=sides)
+    f1, f2, d1, d2 = _input_grids(m1, m2, config.settle_walk.dissimilarity.wall_sides)
     chosen = {id(h) for h in [hypotheses[0], *rivals]}
     rejudged = []
     for h in hypotheses:
@@ -935,8 +923,7 @@ def _settle(
                 distances2=d2,
             )
             transform = np.asarray(walk.transform, dtype=np.float64)
-            walls = wall_match(f1, f2, transform, distances1=d1, distances2=d2)
-            h = replace(h, fine_walls=walls, fine_transform=transform)
+            h = replace(h, fine_walls=wall_match(f1, f2, transform, distances1=d1, distances2=d2))
         rejudged.append(h)
     return replace(candidates, hypotheses=rejudged)
 
@@ -1136,6 +1123,20 @@ def refine_transform(
     return _refine_at_input_resolution(m1, m2, walk.transform, config, rng)
 
 
+def _input_is_finer(m1: GridMap, m2: GridMap, work: _Working) -> bool:
+    """Whether the finer input map is finer than the working grid."""
+    return min(m1.resolution, m2.resolution) < work.resolution * (1.0 - 1e-9)
+
+
+def _input_grids(
+    m1: GridMap, m2: GridMap, sides: bool
+) -> tuple[GridMap, GridMap, DistanceMaps, DistanceMaps]:
+    """Both maps at the finer input resolution, and their distance maps."""
+    fine = min(m1.resolution, m2.resolution)
+    f1, f2 = at_resolution(m1, fine), at_resolution(m2, fine)
+    return f1, f2, distance_maps(f1, sides=sides), distance_maps(f2, sides=sides)
+
+
 def _refine_at_input_resolution(
     m1: GridMap,
     m2: GridMap,
@@ -1144,10 +1145,7 @@ def _refine_at_input_resolution(
     rng: np.random.Generator,
 ) -> tuple[FloatArray, float, Agreement]:
     """The last random walk, at the finer input resolution: transform, psi, agreement."""
-    fine = min(m1.resolution, m2.resolution)
-    f1, f2 = at_resolution(m1, fine), at_resolution(m2, fine)
-    sides = config.final_random_walk.dissimilarity.wall_sides
-    d1, d2 = distance_maps(f1, sides=sides), distance_maps(f2, sides=sides)
+    f1, f2, d1, d2 = _input_grids(m1, m2, config.final_random_walk.dissimilarity.wall_sides)
     final = refine_random_walk(
         f1,
         f2,
