@@ -73,7 +73,7 @@ from agents.rendezvous import (
 )
 from agents.robot import DEFAULT_ENV, EnvFigures, build_for_env, check_against_env
 from mrslam_env.config import EnvConfig
-from mrslam_env.geometry import compose, inverse, transform_points
+from mrslam_env.geometry import compose, inverse, mean_pose, transform_points
 from mrslam_env.gridmap import UNKNOWN, GridMap
 from mrslam_env.merge.decide import check_conflict_fraction
 from mrslam_env.merge.dissimilarity import acceptance_index
@@ -97,7 +97,6 @@ __all__ = [
     "TeamState",
     "distinct_hypotheses",
     "in_plain_sight",
-    "mean_pose",
     "window",
 ]
 
@@ -947,9 +946,8 @@ class TeamCoordinator:
                 if peer[0] < 0.5:
                     continue
                 seen = sighting_pose(peer[1], peer[2], peer[3])
-                mine, theirs = (poses[0], poses[1]) if me == side0 else (poses[1], poses[0])
-                me_from_other = compose(compose(mine, seen), inverse(theirs))
-                estimates.append(me_from_other if me == side0 else inverse(me_from_other))
+                side1_in_side0 = seen if me == side0 else inverse(seen)
+                estimates.append(compose(compose(poses[0], side1_in_side0), inverse(poses[1])))
             if not estimates:
                 continue
             track = self._sightings.setdefault(self.pair, deque(maxlen=count))
@@ -982,7 +980,6 @@ class TeamCoordinator:
         x, y, theta = hypothesis
         self.hypotheses_tested += 1
         self.sighting_hypotheses += 1
-        transform, how = hypothesis, "kept as seen"
         try:
             refined, _, _ = refine_transform(
                 m0, m1, hypothesis, self.config.merge, rng=self._sighting_rng
@@ -994,8 +991,10 @@ class TeamCoordinator:
             and self._within_verified(refined, hypothesis, poses[1][:2])
             and self._map_check(near0, near1, refined) is None
         ):
-            transform, how = refined, "refined on the maps"
-        conflict = self._map_check(near0, near1, transform)
+            transform, how, conflict = refined, "refined on the maps", None
+        else:
+            transform, how = hypothesis, "kept as seen"
+            conflict = self._map_check(near0, near1, transform)
         seen = (
             f"{names[0]} and {names[1]} saw each other on {self.config.sighting_count} "
             f"steps: hypothesis x {x:.2f}, y {y:.2f}, theta {theta:.3f}"
@@ -1280,7 +1279,7 @@ class TeamCoordinator:
             rendezvous.in_place
             and rendezvous.last_match is not None
             and (self.step - rendezvous.last_match >= lost_after or idle)
-            and self._drive_to_meet(rendezvous, maps, self.step - rendezvous.last_match)
+            and self._drive_to_meet(rendezvous, maps)
         ):
             return
         if rendezvous.first_match is not None:
@@ -1323,11 +1322,14 @@ class TeamCoordinator:
         for side, goal in enumerate((point0, point1)):
             self._send(side, goal)
 
-    def _drive_to_meet(self, rendezvous: _Rendezvous, maps: MapSource, unseen: int) -> bool:
+    def _drive_to_meet(self, rendezvous: _Rendezvous, maps: MapSource) -> bool:
         """A hypothesis matched where the robots stood, then they lost sight of each
-        other before it was confirmed (exploring on, they part): both drive to its
+        other before it was confirmed (exploring on, they part), or a hypothesis from
+        sightings that no later meeting tested within ``sighting_wait``: both drive to its
         meeting point, and the confirmation goes on there as at any rendezvous. False
         (nothing changed) when no meeting point is within ``max_meeting_cost``."""
+        assert rendezvous.last_match is not None
+        unseen = self.step - rendezvous.last_match
         hypothesis = rendezvous.hypothesis
         avoid = None
         if rendezvous.formed_at is not None:  # meet where the sightings test the maps
@@ -1642,14 +1644,13 @@ class TeamCoordinator:
             for j in members:
                 if j != i and self._reach[i, j]:
                     self._shared[(i, j)] = (poses[j][:2].copy(), self._target_of(j), self.step)
-                elif memory and self.step - self._shared.get((i, j), (0, 0, self.step))[2] > memory:
+                elif (
+                    memory
+                    and (i, j) in self._shared
+                    and self.step - self._shared[(i, j)][2] > memory
+                ):
                     del self._shared[(i, j)]  # too old to trust
-            known = [
-                (j, position, target)
-                for j in members
-                if (i, j) in self._shared
-                for position, target, _ in (self._shared[(i, j)],)
-            ]
+            known = [(j, *self._shared[(i, j)][:2]) for j in members if (i, j) in self._shared]
             mine = self._target_of(i)
             replan = getattr(policy, "request_replan", None)
             radius = getattr(policy, "shared_target_radius", self.config.explorer.separation / 4)
@@ -1732,13 +1733,6 @@ def _points(points: Any) -> FloatArray:
 
 def _no_map(robot: int) -> GridMap:
     raise RuntimeError("the team has not acted yet: no maps")
-
-
-def mean_pose(poses: ArrayLike) -> FloatArray:
-    """The mean of poses (K, 3): positions averaged, headings by their unit vectors."""
-    array = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-    heading = math.atan2(float(np.sin(array[:, 2]).mean()), float(np.cos(array[:, 2]).mean()))
-    return np.array([array[:, 0].mean(), array[:, 1].mean(), heading])
 
 
 def window(grid: GridMap, point: ArrayLike, radius: float) -> GridMap:

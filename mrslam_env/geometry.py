@@ -71,6 +71,16 @@ def inverse(a: ArrayLike) -> FloatArray:
     return np.stack([x, y, wrap_angle(-a[..., 2])], axis=-1)
 
 
+def mean_pose(poses: ArrayLike, weights: ArrayLike | None = None) -> FloatArray:
+    """The (weighted) mean of poses (K, 3): positions averaged, headings by their unit
+    vectors (so that headings either side of ±π average to ±π, not 0)."""
+    array = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    w = np.full(len(array), 1.0) if weights is None else np.asarray(weights, dtype=np.float64)
+    w = w / w.sum()
+    heading = math.atan2(float(w @ np.sin(array[:, 2])), float(w @ np.cos(array[:, 2])))
+    return np.array([float(w @ array[:, 0]), float(w @ array[:, 1]), heading])
+
+
 def transform_points(a_from_b: ArrayLike, points_in_b: ArrayLike) -> FloatArray:
     """Map points (N, 2) given in frame b into frame a."""
     t = np.asarray(a_from_b, dtype=np.float64)

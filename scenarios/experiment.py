@@ -352,8 +352,8 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
         coverage_step: int | None = None
         events: list[str] = []  # the team's decisions, "STEP TEXT"
         last_pending = 0
-        keep_on = config.until_merged and config.interaction and not config.oracle
-        keep_on = keep_on and not config.single
+        keep_on = config.until_merged and config.interaction
+        keep_on = keep_on and not (config.oracle or config.single)
         steps = 0
         interrupted: str | None = None
         started = time.perf_counter()
@@ -374,9 +374,9 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                         collisions[agent] += infos[agent]["collision"]
                         slam_poses[i].append(observations[agent]["pose"])
                         true_poses[i].append(infos[agent]["true_pose"])
+                    decisions = team.pop_decisions()
                     if recorder is not None:
                         recorder.set_time(steps, steps * env_config.dt)
-                        decisions = team.pop_decisions()
                         for decision in decisions:
                             recorder.log_event(decision.text)
                             if "rendezvous" in decision.text or "hypothesis #" in decision.text:
@@ -411,8 +411,6 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                         if recorder.map_due:
                             for i, agent in enumerate(agents):
                                 recorder.log_scalar(f"ate/{agent}", ate(i))
-                    else:
-                        decisions = team.pop_decisions()
                     events += [f"{decision.step} {decision.text}" for decision in decisions]
                     state = team.state
                     if team.merge_pending:
@@ -460,6 +458,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                 "hypotheses_tested": team.hypotheses_tested,
                 "step_verified": team.step_verified,
                 "seeking_steps": sum(team.seeking_steps),
+                "sighting_hypotheses": team.sighting_hypotheses,
             }
             if len(agents) > 2:
                 merge_report["joined"] = len(joined)

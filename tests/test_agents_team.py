@@ -16,12 +16,11 @@ from agents.team import (
     _Rendezvous,
     distinct_hypotheses,
     in_plain_sight,
-    mean_pose,
     window,
 )
 from mrslam_env.config import EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
-from mrslam_env.geometry import compose, inverse
+from mrslam_env.geometry import compose, inverse, mean_pose
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.merge.pipeline import MergeConfig
 from scenarios.experiment import MapCache

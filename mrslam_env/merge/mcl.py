@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from mrslam_env.geometry import wrap_angle
+from mrslam_env.geometry import mean_pose, wrap_angle
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
 from mrslam_env.merge.skeleton import SkeletonConfig, SkeletonGraph, free_space_graph
 from mrslam_env.merge.virtual import VirtualRun
@@ -627,14 +627,14 @@ def particle_clusters(
         if left <= 0 or left < min_weight:
             break
         seed_members = _heaviest_bin_members(bin_index, weights, remaining)
-        centre = _weighted_mean_pose(particles[seed_members], weights[seed_members])
+        centre = mean_pose(particles[seed_members], weights[seed_members])
         members = seed_members
         for _ in range(3):
             near = _within(particles, centre, radius, angle, remaining)
             if not near.any():
                 break
             members = near
-            centre = _weighted_mean_pose(particles[members], weights[members])
+            centre = mean_pose(particles[members], weights[members])
         w = weights[members]
         offsets = particles[members, :2] - centre[:2]
         turns = wrap_angle(particles[members, 2] - centre[2])
@@ -756,12 +756,6 @@ def _heaviest_bin_members(
     for i in range(bin_index.shape[0]):
         out[i] = remaining[i] and bin_index[i] == best
     return out
-
-
-def _weighted_mean_pose(particles: FloatArray, weights: FloatArray) -> FloatArray:
-    w = weights / weights.sum()
-    heading = math.atan2(float(w @ np.sin(particles[:, 2])), float(w @ np.cos(particles[:, 2])))
-    return np.array([float(w @ particles[:, 0]), float(w @ particles[:, 1]), heading])
 
 
 def localize_in_map(

@@ -37,7 +37,8 @@ Reported per scenario:
 ``seeking_steps``          robot-steps the team runs spent seeking contact (driving
                            back to the place of the last link and waiting there)
 ``steps_after_coverage``   steps the team runs went on after reaching their target
-                           coverage without a verified merge (``until_merged``)
+                           coverage without a verified merge, until merged or with
+                           nothing left to explore (``until_merged``)
 ``collisions[mode]``       collision steps per run (summed over the moving robots):
                            median, max, and the median as % of the moving robots' steps
 =========================  ==========================================================
