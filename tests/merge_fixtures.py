@@ -36,8 +36,10 @@ def scan_map(
     max_range: float = 8.0,
 ) -> GridMap:
     """The trinary map a robot with perfect poses makes scanning from ``poses_in_world``
-    (K, 3), expressed in the frame ``world_from_map`` (3,)."""
-    grid = OccupancyGrid(GridConfig(resolution=resolution))
+    (K, 3), expressed in the frame ``world_from_map`` (3,). The grid takes the full miss in
+    every cell (``log_odds_miss_held=None``): the merge tests' cases were built on those
+    maps, before the SLAM default kept cells that hold hits (issue 20)."""
+    grid = OccupancyGrid(GridConfig(resolution=resolution, log_odds_miss_held=None))
     map_from_world = inverse(world_from_map)
     for pose in np.atleast_2d(poses_in_world):
         ranges = cast_scan(pose[0], pose[1], pose[2], n_beams, max_range, world.segments, NO_DISCS)

@@ -129,7 +129,10 @@ def test_the_default_experiment_verifies_a_merge_and_records_the_team(capsys, tm
     ):
         assert entity in recording.chunks, entity
     events = " ".join(str(text) for text in recording.column("/events", "TextLog:text"))
-    assert "rendezvous for hypothesis" in events and "accepted" in events
+    # A hypothesis is verified by a rendezvous, or (since the SLAM keeps grazed walls,
+    # issue 20) by a sighting where predicted right when it is proposed.
+    assert "rendezvous for hypothesis" in events or "where predicted from here" in events
+    assert "accepted" in events
     # The live merge is recorded, stage by stage, and robot 1 joins the Team view.
     for entity in ("/merge/map1", "/merge/map2", "/merge/hypotheses", "/team/robot_1/pose"):
         assert entity in recording.chunks, entity

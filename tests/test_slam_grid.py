@@ -85,10 +85,9 @@ def fields_from_scratch(grid: OccupancyGrid) -> tuple[np.ndarray, np.ndarray]:
 
 
 def assert_fields_consistent(grid: OccupancyGrid) -> None:
-    occupied = grid.log_odds > grid.config.occupied_threshold
-    surface = grid.stamp_index >= 0  # every OCCUPIED cell, and some the map cleared
+    # The surface cells: not the map's OCCUPIED cells (the layers take different misses).
+    surface = grid.stamp_index >= 0
     assert np.array_equal(surface, grid._surface_odds > grid.config.occupied_threshold)
-    assert np.all(surface[occupied])
     assert np.all(grid.sector_mask[surface] & (1 << SECTORS) - 1 > 0)
     assert np.all(grid.sector_mask[~surface] == 0)
     fine, coarse = fields_from_scratch(grid)
@@ -136,6 +135,7 @@ def reference_integrate(
     surface: np.ndarray,
     hit_mean: np.ndarray,
     hit_count: np.ndarray,
+    held: np.ndarray,
     masks: np.ndarray,
     origin: tuple[float, float],
     resolution: float,
@@ -166,8 +166,12 @@ def reference_integrate(
                 t_in = max(t_in, min((low - start) / delta, (low + resolution - start) / delta))
         return t_in
 
-    def miss(value: np.float32) -> np.float32:
-        return np.float32(max(float(value) + config.log_odds_miss, config.log_odds_min))
+    def miss(value: np.float32, weight: float = config.log_odds_miss) -> np.float32:
+        return np.float32(max(float(value) + weight, config.log_odds_min))
+
+    held_miss = (
+        config.log_odds_miss if config.log_odds_miss_held is None else config.log_odds_miss_held
+    )
 
     returned = (ranges >= config.min_range) & (ranges < max_range)
     hit_cells = {cell_of(*end_point(i, ranges[i])[:2]) for i in np.flatnonzero(returned)}
@@ -179,13 +183,18 @@ def reference_integrate(
         ex, ey, a = end_point(i, length)
         # The near-surface zone: the last stretch of a returning beam within
         # surface_margin of its surface (across it), at most SURFACE_ZONE_CELLS cells.
-        zone_start = 2.0
+        zone_start = held_start = 2.0
         if returned[i] and config.surface_margin > 0:
             incidence = abs(normals[i] @ [math.cos(a - heading), math.sin(a - heading)])
             along = SURFACE_ZONE_CELLS * resolution
             if incidence * along > config.surface_margin:
                 along = config.surface_margin / incidence
             zone_start = 1.0 - along / length
+            # ... and the stretch where the map's miss in a cell holding hits is weaker.
+            along = config.held_reach
+            if incidence * along > config.surface_margin:
+                along = config.surface_margin / incidence
+            held_start = 1.0 - along / length
         count = traverse(x, y, ex, ey, origin[0], origin[1], resolution, buffer)
         for k, (iy, ix) in enumerate(buffer[:count]):
             if (iy, ix) in hit_cells or (
@@ -194,12 +203,12 @@ def reference_integrate(
                 if returned[i]:
                     continue
                 break
-            log_odds[iy, ix] = miss(log_odds[iy, ix])
-            near_surface = (
-                returned[i]
-                and hit_count[iy, ix] > 0
-                and (entry_fraction(ex, ey, iy, ix) if k > 0 else 0.0) >= zone_start
-            )
+            entry = entry_fraction(ex, ey, iy, ix) if k > 0 else 0.0
+            weaker = returned[i] and held[iy, ix] and entry >= held_start
+            log_odds[iy, ix] = miss(log_odds[iy, ix], held_miss if weaker else config.log_odds_miss)
+            if log_odds[iy, ix] <= config.log_odds_min:
+                held[iy, ix] = False
+            near_surface = returned[i] and hit_count[iy, ix] > 0 and entry >= zone_start
             if near_surface:
                 continue  # the surface layer ignores it
             surface[iy, ix] = miss(surface[iy, ix])
@@ -211,6 +220,7 @@ def reference_integrate(
         ex, ey, a = end_point(i, ranges[i])
         iy, ix = cell_of(ex, ey)
         hit_count[iy, ix] = min(hit_count[iy, ix] + 1, HIT_AVERAGE_CAP)
+        held[iy, ix] = True
         offset = np.array([(ex - origin[0]) / resolution - ix, (ey - origin[1]) / resolution - iy])
         hit_mean[iy, ix] += ((offset - hit_mean[iy, ix]) / hit_count[iy, ix]).astype(np.float32)
         log_odds[iy, ix] = np.float32(
@@ -239,6 +249,7 @@ def test_integration_matches_the_slow_reference() -> None:
     surface = grid._surface_odds.copy()
     hit_mean = grid._hit_mean.copy()
     hit_count = grid._hit_count.copy()
+    held = grid._hit_held.copy()
     masks = grid.sector_mask.copy()
     for step in range(25):
         pose = np.array([rng.uniform(0.5, 5.5), rng.uniform(0.5, 3.5), rng.uniform(-4, 4)])
@@ -249,14 +260,14 @@ def test_integration_matches_the_slow_reference() -> None:
         ranges[rng.random(360) < 0.02] = 0.01  # below min_range: skipped
         normals = scan_normals(ranges, 8.0, config.min_range)
         reference_integrate(
-            log_odds, surface, hit_mean, hit_count, masks, grid.origin, grid.resolution, pose,
+            log_odds, surface, hit_mean, hit_count, held, masks, grid.origin, grid.resolution, pose,
             ranges, normals, 8.0, config,
         )  # fmt: skip
         grid.integrate_scan(pose, ranges, 8.0, normals)
         assert grid.shape == log_odds.shape, "the room fits: no growth expected"
         np.testing.assert_array_equal(grid.log_odds, log_odds, err_msg=f"step {step}")
         np.testing.assert_array_equal(grid._surface_odds, surface, err_msg=f"step {step}")
-        assert np.all(surface >= log_odds)
+        np.testing.assert_array_equal(grid._hit_held, held)
         np.testing.assert_allclose(grid._hit_mean, hit_mean, atol=1e-6)
         np.testing.assert_array_equal(grid._hit_count, hit_count)
         np.testing.assert_array_equal(grid.sector_mask, masks)
@@ -271,6 +282,33 @@ def test_integration_matches_the_slow_reference() -> None:
         np.testing.assert_array_equal(grid.stamp_index, expected_index)
     assert_fields_consistent(grid)
     assert (grid.log_odds > 0.5).sum() > 300 and (grid.log_odds < -0.5).sum() > 5000
+
+
+def grazing_wall_face(config: GridConfig) -> np.ndarray:
+    """Log-odds of the cells a wall's face lies in (halfway across them), 3-6 m ahead of
+    a robot that drives 2 m along the wall 1 m from it: it sees them only at 9-18° of
+    incidence, each hit by the beams ending there and passed by those ending further on."""
+    face = 1.025
+    world = WorldSpec.from_walls("wall", [box(-30.0, face, 30.0, face + 0.1)], [[0, 0, 0]])
+    rng = np.random.default_rng(3)
+    grid = OccupancyGrid(config)
+    for x in np.arange(-3.0, -1.0, 0.05):
+        pose = np.array([x, 0.013, 0.3])
+        grid.integrate_scan(pose, noisy_scan(world, pose, rng), 8.0)
+    iy, start = grid.world_to_cell([2.0, face])
+    stop = grid.world_to_cell([5.0, face])[1]
+    return grid.log_odds[iy, start:stop]
+
+
+def test_a_wall_seen_at_a_grazing_angle_stays_occupied() -> None:
+    config = GridConfig()
+    face = grazing_wall_face(config)
+    assert (face > config.occupied_threshold).mean() >= 0.9
+    # With the full miss in cells that hold hits (the textbook update), the passes outvote
+    # the hits and most of the face reads FREE.
+    textbook = grazing_wall_face(replace(config, log_odds_miss_held=None))
+    assert (textbook > config.occupied_threshold).mean() < 0.3
+    assert (textbook < config.free_threshold).mean() > 0.5
 
 
 def test_beams_without_return_clear_only_so_far_and_stop_at_walls() -> None:

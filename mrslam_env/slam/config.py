@@ -34,6 +34,17 @@ class GridConfig:
     """Log-odds added to the cell a beam ends in (> 0)."""
     log_odds_miss: float = -0.4
     """Log-odds added to every cell a beam passes before its end (< 0)."""
+    log_odds_miss_held: float | None = -0.1
+    """Log-odds the map (not the likelihood fields' surface layer) adds to a cell that a
+    returning beam passes near its end (``held_reach``) when some beam has ended in that
+    cell since it was last clamped at ``log_odds_min`` (< 0, at most as strong as
+    ``log_odds_miss``; None: the same as ``log_odds_miss``). A wall seen along its length
+    at a grazing angle is hit now and then in the cells of its face and passed several
+    times as often by the beams that end further along it; with the full miss those
+    passes erase the face (FREE where the wall is). With -0.1 against +0.85 a cell stays
+    OCCUPIED while its hits are more than about a tenth of the beams through it: the
+    ratio model of Karto (slam_toolbox; occupancy threshold 0.1) and, less lenient, of
+    gmapping (``occ_thresh`` 0.25)."""
     log_odds_min: float = -2.0
     """Lower clamp of a cell's log-odds (< 0): bounds how long a free cell takes to turn."""
     log_odds_max: float = 3.5
@@ -57,6 +68,14 @@ class GridConfig:
     beams clear the front row; without its kernel, the back row's mean hit point (the
     noise's far half) would sit millimetres behind the surface, and the scan matcher would
     drift (see :mod:`mrslam_env.slam.grid`)."""
+    held_reach: float = 1.0
+    """How far back along a returning beam from its end ``log_odds_miss_held`` applies, m:
+    the cells within ``surface_margin`` of the surface the beam ends on (across it, from
+    the return's normal; a return without one is a grazing one and gets the whole reach).
+    Further back, and on beams with no return, a cell that holds hits takes the full
+    ``log_odds_miss``, so that the hits of a passing robot seen from afar (which the peer
+    sensor does not mask) do not linger in open space. 1 m covers a wall grazed at 3° a
+    cell in front of it."""
     growth_chunk: int = 64
     """The grid grows by whole multiples of this many cells per side."""
     fine_sigma: float = 0.1
@@ -82,11 +101,21 @@ class GridConfig:
                 "no_return_clear_distance",
                 "min_range",
                 "surface_margin",
+                "held_reach",
             ),
         )
         for attr in ("log_odds_miss", "log_odds_min"):
             value = getattr(self, attr)
             require(name, attr, value, math.isfinite(value) and value < 0, "a finite number < 0")
+        if self.log_odds_miss_held is not None:
+            value = self.log_odds_miss_held
+            require(
+                name,
+                "log_odds_miss_held",
+                value,
+                math.isfinite(value) and self.log_odds_miss <= value < 0,
+                f"a finite number in [log_odds_miss ({self.log_odds_miss}), 0) or None",
+            )
         value = self.free_threshold
         require(name, "free_threshold", value, math.isfinite(value) and value <= 0, "<= 0")
         require(

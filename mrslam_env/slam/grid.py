@@ -8,11 +8,19 @@ a cell never changes its place in the map frame when the grid grows.
 **Integration.** A scan updates the log-odds with an inverse sensor model (Thrun et al.,
 *Probabilistic Robotics*, §9.2): every cell a beam passes (Amanatides & Woo traversal, as in
 :mod:`mrslam_env.slam.raycast`) gets ``log_odds_miss`` once per beam, the cell the beam
-ends in gets ``log_odds_hit``; values are clamped to ``[log_odds_min, log_odds_max]``. Two
+ends in gets ``log_odds_hit``; values are clamped to ``[log_odds_min, log_odds_max]``. Three
 refinements of the textbook model:
 
 * a cell some beam of the scan ends in is not also cleared by the other beams of the same
   scan (beams grazing a wall would otherwise erase it; Cartographer does the same);
+* a cell some beam has ended in since its log-odds were last clamped at ``log_odds_min``
+  takes only ``log_odds_miss_held`` in the map (the surface layer below takes
+  ``log_odds_miss``) from a returning beam that passes it near its end (``held_reach``
+  along the beam, ``surface_margin`` across the surface it ends on): across scans, a wall
+  seen along its length at a grazing angle is hit now and then in the cells of its face
+  and passed several times as often by the beams ending further along it, and the full
+  miss would erase the face (the ratio model of Karto keeps such cells occupied, see
+  :class:`~mrslam_env.slam.config.GridConfig`);
 * a beam with no return (range == max range) clears at most ``no_return_clear_distance``
   and stops at the first OCCUPIED cell: a dropout in front of a wall is not evidence that
   the wall is gone.
@@ -21,16 +29,19 @@ refinements of the textbook model:
 of integer-valued Gaussian kernels, one per *surface cell*, centred not on the cell centre
 but on the cell's mean hit point (rounded to an eighth of a cell, :data:`SUBCELLS`), so
 that a wall's ridge lies on its measured surface. The surface cells are those OCCUPIED in
-a second log-odds layer that takes the same updates except the misses *near the surface*
-a beam ends on (within ``surface_margin`` of it, see
-:class:`~mrslam_env.slam.config.GridConfig`): range noise splits the hits on a wall that
-lies near a cell edge between two rows of cells, and the beams ending on the wall clear
-the front row; without its kernel, the back row's mean hit point (the noise's far half)
-would put the ridge millimetres behind the surface, and the matcher would turn that into
-heading drift. The map itself (the first layer) still clears the front row, so walls do
-not grow thicker. Summing is linear: a cell that becomes a surface cell adds its kernel,
-one that stops being one (or whose mean point moves) subtracts it again, and the float32
-sums stay exact. There are two kinds:
+a second log-odds layer that takes the same updates, except that every miss counts in full
+(``log_odds_miss``: the matcher's fields stay as they were measured before the map's
+weaker miss came in) and the misses *near the surface* a beam ends on are ignored (within
+``surface_margin`` of it, see :class:`~mrslam_env.slam.config.GridConfig`): range noise
+splits the hits on a wall that lies near a cell edge between two rows of cells, and the
+beams ending on the wall clear the front row; without its kernel, the back row's mean hit
+point (the noise's far half) would put the ridge millimetres behind the surface, and the
+matcher would turn that into heading drift. The map itself (the first layer) still takes
+those misses, but in a front row that holds hits only at its weaker rate, so such a row
+can stay OCCUPIED and the map's wall a cell thicker than the surface layer's. Summing is
+linear: a cell that becomes a surface cell adds its kernel, one that stops being one (or
+whose mean point moves) subtracts it again, and the float32 sums stay exact. There are two
+kinds:
 
 * the *coarse* field (``coarse_sigma``), one for all cells, for the coarse search;
 * the *fine* fields (``fine_sigma``), one per *facing sector*: a hit on a surface whose
@@ -280,6 +291,7 @@ def integrate_scan(
     hit_marks: NDArray[np.int32],
     hit_mean: Float32Array,
     hit_count: NDArray[np.int32],
+    hit_held: NDArray[np.bool_],
     stamp_index: NDArray[np.int8],
     sector_mask: NDArray[np.uint8],
     fine_fields: Float32Array,
@@ -300,11 +312,13 @@ def integrate_scan(
     no_return_clear_distance: float,
     log_odds_hit: float,
     log_odds_miss: float,
+    log_odds_miss_held: float,
     log_odds_min: float,
     log_odds_max: float,
     occupied_threshold: float,
     free_threshold: float,
     surface_margin: float,
+    held_reach: float,
     written: NDArray[np.int64],
 ) -> tuple[int, int, int]:
     """Integrate one scan into a log-odds grid and its likelihood fields (in place).
@@ -314,8 +328,9 @@ def integrate_scan(
     log_odds : ndarray, shape (rows, cols), float32
         The grid.
     surface_odds : ndarray, shape (rows, cols), float32
-        The surface layer: log-odds updated like ``log_odds`` except for the misses near
-        the surface a beam ends on (``surface_margin``); the cells where it exceeds
+        The surface layer: log-odds updated like ``log_odds``, except that it takes
+        ``log_odds_miss`` in every cell and no miss near the surface a beam ends on
+        (``surface_margin``); the cells where it exceeds
         ``occupied_threshold`` are the surface cells, which carry the kernels.
     hit_marks : ndarray, shape (rows, cols), int32
         Scratch: cells ending a beam of this scan are set to ``scan_id``, which must differ
@@ -326,6 +341,10 @@ def integrate_scan(
     hit_count : ndarray, shape (rows, cols), int32
         Hits in that mean (capped at ``HIT_AVERAGE_CAP``); reset to 0 when the cell stops
         being a surface cell, so that the mean starts afresh.
+    hit_held : ndarray, shape (rows, cols), bool
+        Per cell, whether a beam has ended in it since its log-odds were last at
+        ``log_odds_min``: such a cell takes ``log_odds_miss_held`` in ``log_odds`` instead
+        of ``log_odds_miss`` (the surface layer always takes ``log_odds_miss``).
     stamp_index : ndarray, shape (rows, cols), int8
         The sub-cell kernel each cell adds to the fields, -1 for none: >= 0 exactly for the
         surface cells (``surface_odds`` above ``occupied_threshold``).
@@ -353,6 +372,8 @@ def integrate_scan(
     max_range, min_range, no_return_clear_distance : float
         m.
     log_odds_hit, log_odds_miss, log_odds_min, log_odds_max : float
+    log_odds_miss_held : float
+        The map's miss in a cell that holds a hit (see ``hit_held``).
     occupied_threshold, free_threshold : float
         The update and the trinary thresholds (see
         :class:`~mrslam_env.slam.config.GridConfig`).
@@ -360,6 +381,10 @@ def integrate_scan(
         m: misses of a returning beam within this distance of the surface it ends on
         (across the surface, from the return's normal; along the beam at most
         ``SURFACE_ZONE_CELLS`` cells) leave ``surface_odds`` alone in cells that hold hits.
+    held_reach : float
+        m: a returning beam's misses within ``surface_margin`` of the surface it ends on
+        (across it, from the return's normal; along the beam at most this far) take
+        ``log_odds_miss_held`` in ``log_odds`` in the cells ``hit_held`` marks.
     written : ndarray, shape (W,), int64
         Out: the flat indices (``row * cols + col``) of the cells whose log-odds were
         written, in order, repeats included; only the first W are stored.
@@ -405,7 +430,11 @@ def integrate_scan(
         a = heading - math.pi + i * dtheta
         # Where the beam comes within surface_margin of the surface it ends on (as a
         # fraction of the beam): its misses there leave the surface layer alone.
+        # Likewise, up to held_reach along it, where the map's miss in a cell that holds
+        # hits is the weaker log_odds_miss_held. A return without a normal is a grazing
+        # one (its neighbours are too far apart along the surface): the whole reach.
         zone_start = 2.0
+        held_start = 2.0
         if returned and surface_margin > 0.0:
             incidence = abs(normals[i, 0] * math.cos(i * dtheta - math.pi) +
                             normals[i, 1] * math.sin(i * dtheta - math.pi))  # fmt: skip
@@ -413,6 +442,10 @@ def integrate_scan(
             if incidence * along > surface_margin:
                 along = surface_margin / incidence
             zone_start = 1.0 - along / r
+            along = held_reach
+            if incidence * along > surface_margin:
+                along = surface_margin / incidence
+            held_start = 1.0 - along / r
         # The same set-up as raycast.traverse, so both visit the very same cells.
         ix, iy, step_x, step_y, t_max_x, t_max_y, t_delta_x, t_delta_y, n_steps = dda_start(
             x, y, x + r * math.cos(a), y + r * math.sin(a), origin_x, origin_y, resolution
@@ -431,19 +464,25 @@ def integrate_scan(
             if not (0 <= iy < rows and 0 <= ix < cols):
                 continue
             before = log_odds[iy, ix]
-            surface_before = surface_odds[iy, ix]  # >= before: it misses fewer misses
+            surface_before = surface_odds[iy, ix]
+            # Both layers clamped: a miss changes nothing (most cells a beam crosses are
+            # known free), so skip them before touching ``hit_marks``.
+            cleared = surface_before <= log_odds_min and before <= log_odds_min
             near_surface = False
             if returned:
-                # Most cells a beam crosses are known free and clamped: a miss changes
-                # nothing there, so skip them before touching ``hit_marks``.
-                if surface_before <= log_odds_min or hit_marks[iy, ix] == scan_id:
+                if cleared or hit_marks[iy, ix] == scan_id:
                     continue
                 near_surface = t_entry >= zone_start and hit_count[iy, ix] > 0
             elif hit_marks[iy, ix] == scan_id or before > occupied_threshold:
                 break
-            elif surface_before <= log_odds_min:
+            elif cleared:
                 continue
-            after = np.float32(max(before + log_odds_miss, log_odds_min))
+            miss = log_odds_miss
+            if hit_held[iy, ix] and t_entry >= held_start:
+                miss = log_odds_miss_held
+            after = np.float32(max(before + miss, log_odds_min))
+            if after <= log_odds_min:
+                hit_held[iy, ix] = False
             log_odds[iy, ix] = after
             if n_written < capacity:
                 written[n_written] = iy * cols + ix
@@ -480,6 +519,7 @@ def integrate_scan(
         mean_y = hit_mean[iy, ix, 1] + (gy - iy - hit_mean[iy, ix, 1]) / count
         hit_mean[iy, ix, 0] = mean_x
         hit_mean[iy, ix, 1] = mean_y
+        hit_held[iy, ix] = True
         # Round to float32 before comparing: the stored value decides the cell's state.
         before = log_odds[iy, ix]
         after = np.float32(min(max(before + log_odds_hit, log_odds_min), log_odds_max))
@@ -557,6 +597,7 @@ class OccupancyGrid:
         self._hit_marks = np.zeros(shape, dtype=np.int32)
         self._hit_mean = np.zeros((*shape, 2), dtype=np.float32)
         self._hit_count = np.zeros(shape, dtype=np.int32)
+        self._hit_held = np.zeros(shape, dtype=np.bool_)
         self._stamp_index = np.full(shape, -1, dtype=np.int8)
         self._sector_mask = np.zeros(shape, dtype=np.uint8)
         self._fine_fields = np.zeros((SECTORS, *shape), dtype=np.float32)
@@ -712,6 +753,7 @@ class OccupancyGrid:
         self._hit_marks = grown(self._hit_marks)
         self._hit_mean = grown(self._hit_mean)
         self._hit_count = grown(self._hit_count)
+        self._hit_held = grown(self._hit_held)
         self._stamp_index = grown(self._stamp_index, -1)
         self._sector_mask = grown(self._sector_mask)
         self._fine_fields = grown(self._fine_fields, leading=1)
@@ -770,6 +812,7 @@ class OccupancyGrid:
             self._hit_marks,
             self._hit_mean,
             self._hit_count,
+            self._hit_held,
             self._stamp_index,
             self._sector_mask,
             self._fine_fields,
@@ -790,11 +833,15 @@ class OccupancyGrid:
             clear,
             config.log_odds_hit,
             config.log_odds_miss,
+            config.log_odds_miss
+            if config.log_odds_miss_held is None
+            else config.log_odds_miss_held,
             config.log_odds_min,
             config.log_odds_max,
             config.occupied_threshold,
             config.free_threshold,
             config.surface_margin,
+            config.held_reach,
             self._written,
         )
         self.known_cells += int(newly_known)
