@@ -94,6 +94,17 @@ class MergeInputError(ValueError):
     apart); the message is one line naming the problem."""
 
 
+def _fine_walk(iterations: int) -> RandomWalkConfig:
+    """A random walk at the input resolution: small first steps, walls matched by the
+    side they were seen from."""
+    return RandomWalkConfig(
+        iterations=iterations,
+        initial_std_xy=0.03,
+        initial_std_theta=math.radians(0.5),
+        dissimilarity=DissimilarityConfig(wall_sides=True),
+    )
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class MergeConfig:
     """Everything :func:`merge_maps` decides with."""
@@ -143,14 +154,7 @@ class MergeConfig:
     mcl: MclConfig = field(default_factory=MclConfig)
     pooling: HypothesisConfig = field(default_factory=HypothesisConfig)
     random_walk: RandomWalkConfig = field(default_factory=RandomWalkConfig)
-    final_random_walk: RandomWalkConfig = field(
-        default_factory=lambda: RandomWalkConfig(
-            iterations=600,
-            initial_std_xy=0.03,
-            initial_std_theta=math.radians(0.5),
-            dissimilarity=DissimilarityConfig(wall_sides=True),
-        )
-    )
+    final_random_walk: RandomWalkConfig = field(default_factory=lambda: _fine_walk(600))
     """The last refinement, at the input resolution. Its psi matches walls by the side
     they were seen from (``DissimilarityConfig.wall_sides``): two robots often see a thin
     wall from its two sides, and plain psi then lays the faces over each other, a wall's
@@ -259,14 +263,7 @@ class MergeConfig:
     angle). Walls at the input resolution compare two placements of the same overlap;
     a placement of another part (the mirrored wing, the next aisle) explains its own
     overlap and may fit as well as the truth (docs/decisions.md)."""
-    settle_walk: RandomWalkConfig = field(
-        default_factory=lambda: RandomWalkConfig(
-            iterations=200,
-            initial_std_xy=0.03,
-            initial_std_theta=math.radians(0.5),
-            dissimilarity=DissimilarityConfig(wall_sides=True),
-        )
-    )
+    settle_walk: RandomWalkConfig = field(default_factory=lambda: _fine_walk(200))
     """The short refinement of each candidate re-judged at the input resolution: the final
     refinement's (``final_random_walk``) with a third of its iterations."""
     symmetry_proposals: int = 3
