@@ -72,7 +72,7 @@ def rooms_grid(rows: int = 60, cols: int = 80, origin: tuple[float, float] = (-2
     cells = np.full((rows, cols), FR, dtype=np.int8)
     cells[:2], cells[-2:], cells[:, :2], cells[:, -2:] = OC, OC, OC, OC
     cells[:, 40:42] = OC
-    cells[25:35, 40:42] = FR  # door
+    cells[34:52, 40:42] = FR  # door, 0.9 m: wide enough to plan through
     cells[10:30, 8:30] = OC  # big block
     cells[45, 60] = OC  # pillar
     cells[50:53, 10:14] = UN

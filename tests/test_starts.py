@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from agents.planning import PlannerConfig
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
 from mrslam_env.registry import build_world
 from mrslam_env.sim.mapworld import wall_mask, world_from_map
 from mrslam_env.sim.starts import (
+    PASSAGE_MARGIN,
     START_MARGIN,
     START_RESOLUTION,
     cell_clearance,
@@ -106,18 +108,20 @@ def test_start_cells_reach_nothing_from_a_wall_or_off_the_raster() -> None:
     assert not start_cells(np.ones((5, 5), dtype=bool), 0.1, R).any()
 
 
-def test_narrow_passages_split_the_regions() -> None:
-    # Two rooms joined by a 0.3 m slit: a robot of radius 0.2 cannot pass it.
+@pytest.mark.parametrize(("gap", "joined"), [(0.3, False), (0.5, False), (1.0, True)])
+def test_only_passages_the_planner_can_use_join_the_regions(gap: float, joined: bool) -> None:
+    # Two rooms joined by a gap in a wall. A robot of radius 0.2 squeezes through 0.5 m,
+    # but the planner keeps its safety margin clear and never plans through it: the
+    # starts stay in the first room. A 1 m doorway joins the rooms.
+    low, high = 1.3 - gap / 2, 1.3 + gap / 2
     world = enclosure(
-        width=8.0,
-        height=2.6,
-        extra=[box(2.5, 0.1, 2.6, 1.15), box(2.5, 1.45, 2.6, 2.5)],
+        width=8.0, height=2.6, extra=[box(2.5, 0.1, 2.6, low), box(2.5, high, 2.6, 2.5)]
     )
     points = world_start_points(world, R, world.starts[0, :2])
     assert len(points) > 0
-    assert np.all(points[:, 0] < 2.5)
-    small = world_start_points(world, 0.05, world.starts[0, :2])
-    assert np.any(small[:, 0] > 2.6)  # a thin robot gets through
+    assert np.any(points[:, 0] < 2.5)
+    assert np.any(points[:, 0] > 2.6) == joined
+    assert PlannerConfig().safety_margin <= PASSAGE_MARGIN
 
 
 def test_world_start_points_have_clearance_and_stay_connected() -> None:

@@ -13,7 +13,7 @@
   between wall and non-wall cells merged into maximal straight runs
   (:func:`outline_segments`). Interior edges between rectangles are not in it.
 * **Starts** are chosen automatically by the start clearance rule
-  (:mod:`mrslam_env.sim.starts`) in the largest region where the robot fits, far apart,
+  (:mod:`mrslam_env.sim.starts`) in the largest region it can plan through, far apart,
   unless given (then they are checked).
 
 Everything is vectorised numpy: a 1000 x 1000 map builds in a fraction of a second (see
@@ -200,8 +200,8 @@ def _choose_starts(
     """Pick ``n_starts`` far-apart poses in free cells with clearance.
 
     Candidates are the FREE cells among the :func:`~mrslam_env.sim.starts.start_cells`
-    of the wall mask (the start clearance rule, in the largest region where a robot of
-    ``robot_radius`` fits, so every start can reach every other). Of a random sample of
+    of the wall mask (the start clearance rule, in the largest region a robot of
+    ``robot_radius`` can plan through, so every start can reach every other). Of a random sample of
     them, the two farthest apart are chosen, then greedily the cell farthest from those
     chosen. Headings are evenly spread from a random first one.
 

@@ -12,9 +12,10 @@ the distance from its centre to the nearest wall cell's centre, less half a cell
 (:func:`cell_clearance`). A robot of radius ``r`` *fits* in a cell whose estimate is at
 least ``r``; it can *start* in a cell that
 
-* lies in the 4-connected region of fitting cells that holds the reference cell (the
-  world's first start; the largest such region when there is none), so that every start
-  can drive to every other, and
+* lies in the 4-connected region of *passable* cells (estimate at least
+  ``r + PASSAGE_MARGIN``) that holds the reference cell (the world's first start; the
+  largest such region when there is none), so that every start can plan a path to every
+  other with the planner's safety margin, and
 * has an estimate of at least ``r + START_MARGIN``.
 
 The estimate is never below the true distance from the cell centre to the wall cells,
@@ -34,6 +35,7 @@ from scipy import ndimage
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
 
 __all__ = [
+    "PASSAGE_MARGIN",
     "START_MARGIN",
     "START_RESOLUTION",
     "cell_clearance",
@@ -46,6 +48,12 @@ BoolArray = NDArray[np.bool_]
 
 START_MARGIN = 0.3
 """Clearance estimate beyond the robot radius that an automatic start needs, m."""
+PASSAGE_MARGIN = 0.1
+"""Clearance estimate beyond the robot radius that the passages between starts need, m:
+the planner keeps ``PlannerConfig.safety_margin`` (0.08 m) beyond the radius clear, so a
+gap a robot fits through by less is one it never plans through (``planner_test``: robot
+0's start room joins the rest only through gaps 0.20-0.24 m beyond the centre line)."""
+
 START_RESOLUTION = 0.1
 """Cell size of the raster on which starts in a :class:`WorldSpec` are chosen, m."""
 
@@ -90,7 +98,7 @@ def start_cells(
         Robot radius, m (>= 0).
     reachable_from : tuple of int, optional
         ``(row, col)`` of a cell the starts must be reachable from (the first start);
-        default: the largest region where the robot fits. A cell off the raster, or where
+        default: the largest region of passable cells. A cell off the raster, or where
         the robot does not fit, reaches nothing.
 
     Returns
@@ -99,7 +107,7 @@ def start_cells(
         All False when there is no such cell.
     """
     clearance = cell_clearance(walls, resolution)
-    labels, count = ndimage.label(clearance >= radius)
+    labels, count = ndimage.label(clearance >= radius + PASSAGE_MARGIN)
     if reachable_from is None:
         if count == 0:
             return np.zeros(clearance.shape, dtype=bool)
