@@ -210,21 +210,18 @@ class TeamConfig:
                 "seek_contact_back",
                 "seek_contact_wait",
             ),
+            whole=(
+                "refine_every",
+                "seek_contact_after",
+                "sighting_count",
+                "sighting_wait",
+                "teammate_memory",
+            ),
         )
         name = type(self).__name__
         factor = self.regrow_factor
         ok = isinstance(factor, int | float) and math.isfinite(factor) and factor >= 1
         require(name, "regrow_factor", factor, ok, "a finite number >= 1")
-        for attr in (
-            "refine_every",
-            "seek_contact_after",
-            "sighting_count",
-            "sighting_wait",
-            "teammate_memory",
-        ):
-            every = getattr(self, attr)
-            ok = isinstance(every, int) and not isinstance(every, bool) and every >= 0
-            require(name, attr, every, ok, "an int >= 0")
         margin, peer_range = self.sight_margin, self.peer_range
         require(name, "sight_margin", margin, margin < peer_range, f"< peer_range ({peer_range})")
 

@@ -20,9 +20,10 @@ def check_fields(
     positive: tuple[str, ...] = (),
     non_negative: tuple[str, ...] = (),
     counts: tuple[str, ...] = (),
+    whole: tuple[str, ...] = (),
 ) -> None:
     """Validate fields of ``config``: ``positive`` finite numbers > 0, ``non_negative``
-    finite numbers >= 0, ``counts`` ints >= 1 (not bools)."""
+    finite numbers >= 0, ``counts`` ints >= 1 and ``whole`` ints >= 0 (not bools)."""
     name = type(config).__name__
     for attr in positive + non_negative:
         value = getattr(config, attr)
@@ -31,7 +32,7 @@ def check_fields(
             require(name, attr, value, number and value > 0, "a finite number > 0")
         else:
             require(name, attr, value, number and value >= 0, "a finite number >= 0")
-    for attr in counts:
+    for attr, least in [(a, 1) for a in counts] + [(a, 0) for a in whole]:
         value = getattr(config, attr)
-        ok = isinstance(value, int) and not isinstance(value, bool) and value >= 1
-        require(name, attr, value, ok, "an int >= 1")
+        ok = isinstance(value, int) and not isinstance(value, bool) and value >= least
+        require(name, attr, value, ok, f"an int >= {least}")

@@ -306,6 +306,12 @@ class MergeConfig:
                 *fractions,
             ),
             counts=("max_working_cells", "candidates", "hough_peaks"),
+            whole=(
+                "correlation_candidates",
+                "hough_candidates",
+                "symmetry_proposals",
+                "cascade_rivals",
+            ),
         )
         for attr in fractions:
             value = getattr(self, attr)
@@ -314,15 +320,6 @@ class MergeConfig:
         require(name, "max_resolution_ratio", ratio, ratio >= 1.0, ">= 1")
         require(name, "cascade", self.cascade, isinstance(self.cascade, bool), "a bool")
         require(name, "settle", self.settle, isinstance(self.settle, bool), "a bool")
-        for attr in (
-            "correlation_candidates",
-            "hough_candidates",
-            "symmetry_proposals",
-            "cascade_rivals",
-        ):
-            value = getattr(self, attr)
-            whole = isinstance(value, int) and not isinstance(value, bool) and value >= 0
-            require(name, attr, value, whole, "an int >= 0")
         clean = self.clean_conflict_length
         require(
             name,
