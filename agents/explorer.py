@@ -117,6 +117,12 @@ class ExplorerConfig:
     ``target_bonus``). ``"minpos"``: among the frontiers worth a trip, one for which the
     fewest teammates have a shorter path (Bautin et al. 2012, MinPos), the best utility
     among those. Either falls back on ``"targets"`` when it leaves the robot nothing."""
+    contest_targets: bool = True
+    """A teammate's target is left to it only while the teammate is as near to it as
+    this robot: when this robot's path cost to the target's frontier is below the
+    straight-line distance from the teammate's last known position to its target, the
+    target is not the teammate's (neither taken nor discounted) for this robot's choice.
+    False: a teammate's target is always its own."""
     replan_interval: int = 25
     """Steps between routine replans."""
     min_replan_interval: int = 5
@@ -965,7 +971,8 @@ class ExplorerPolicy:
         if len(frontiers):
             # The search stops once no frontier left can beat the best one reached: the
             # choice, its path cost and its path are those of the whole search.
-            gains, excluded, current = self._utility_parts(frontiers, grid)
+            claims = self._claims(frontiers, cost_grid, pose)
+            gains, excluded, current = self._utility_parts(frontiers, grid, claims)
             if config.team_allocation != "targets" and len(self._teammates):
                 # The whole search: the joint choice needs every goal's path cost.
                 distances = distance_field(cost_grid, pose, snap_distance=config.start_snap)
@@ -993,7 +1000,7 @@ class ExplorerPolicy:
             self._target = None
             self._target_cells = np.empty((0, 2))
             self.follower.clear()
-            if len(frontiers) and self._left_to_teammates(frontiers, gains, excluded):
+            if len(frontiers) and self._left_to_teammates(frontiers, gains, excluded, claims):
                 # Not done: what is left is the teammates' for now, and may come back to
                 # this robot (a teammate that gives its target up, or is done).
                 self._empty_replans = 0
@@ -1011,12 +1018,16 @@ class ExplorerPolicy:
         self.status = "exploring"
 
     def _left_to_teammates(
-        self, frontiers: Frontiers, gains: FloatArray, excluded: NDArray[np.bool_]
+        self,
+        frontiers: Frontiers,
+        gains: FloatArray,
+        excluded: NDArray[np.bool_],
+        claims: FloatArray,
     ) -> bool:
         """Whether a frontier worth a trip on its own (gain >= ``min_gain``, not
         blacklisted) was passed over only because of the teammates' targets: taken by one,
         or discounted (:meth:`_utility_parts`' ``gains``) below ``min_gain``."""
-        if len(self._teammate_targets) == 0:
+        if len(claims) == 0:
             return False
         worthwhile = (frontiers.gains >= self.config.min_gain) & ~self._blacklisted(frontiers)
         passed_over = excluded | (gains < self.config.min_gain)
@@ -1038,27 +1049,52 @@ class ExplorerPolicy:
         cells = world_to_cell(self._target_cells, self._grid_origin, self._grid_resolution)
         return _most_overlapping(frontiers.labels, cells)
 
+    def _claims(self, frontiers: Frontiers, cost_grid: CostGrid, pose: FloatArray) -> FloatArray:
+        """The teammates' targets this robot leaves to them, (K, 2): all of them, or with
+        ``contest_targets`` those the teammate is as near to as this robot (its path cost
+        to the nearest frontier goal within ``shared_target_radius`` of the target, against
+        the teammate's straight-line distance from its last known position)."""
+        targets = self._teammate_targets
+        config = self.config
+        if not config.contest_targets or len(targets) == 0 or len(frontiers) == 0:
+            return targets
+        if len(self._teammates) != len(targets):
+            return targets  # which target is whose is not known
+        try:
+            field = distance_field(cost_grid, pose, snap_distance=config.start_snap)
+        except ValueError:
+            return targets
+        rows, cols = frontiers.goal_cells.T
+        mine = field.cost[rows, cols]
+        radius = self.shared_target_radius
+        keep = np.ones(len(targets), dtype=bool)
+        for k, (target, teammate) in enumerate(zip(targets, self._teammates, strict=True)):
+            near = np.hypot(*(frontiers.goals - target).T) < radius
+            if near.any() and mine[near].min() < float(np.hypot(*(target - teammate))):
+                keep[k] = False
+        return targets[keep]
+
     def _utility_parts(
-        self, frontiers: Frontiers, grid: GridMap
+        self, frontiers: Frontiers, grid: GridMap, claims: FloatArray | None = None
     ) -> tuple[FloatArray, NDArray[np.bool_], int]:
         """Per frontier, the path-cost-free parts of its utility: the gain after the
         teammates' discount (``team_discount``), whether it is excluded (a teammate's
         target, blacklisted), and the index of the current target's frontier (-1 if
-        none)."""
+        none). ``claims``: the teammates' targets left to them (:meth:`_claims`; default
+        all)."""
         config = self.config
+        targets = self._teammate_targets if claims is None else claims
         if config.team_discount == "overlap":
             view_range = config.frontiers.sensor_range
-            discount = team_discount(frontiers.goals, self._teammate_targets, view_range, grid)
+            discount = team_discount(frontiers.goals, targets, view_range, grid)
         else:
-            discount = _separation_discount(
-                frontiers.goals, self._teammate_targets, config.separation
-            )
+            discount = _separation_discount(frontiers.goals, targets, config.separation)
         gains = frontiers.gains * discount
         excluded = np.zeros(len(frontiers), dtype=bool)
-        if len(self._teammate_targets):
+        if len(targets):
             # A teammate's own target is taken, however big its gain.
             radius = self.shared_target_radius
-            excluded |= _separation_discount(frontiers.goals, self._teammate_targets, radius) < 1.0
+            excluded |= _separation_discount(frontiers.goals, targets, radius) < 1.0
         excluded |= self._blacklisted(frontiers)
         return gains, excluded, self._current_frontier(frontiers)
 

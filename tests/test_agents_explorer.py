@@ -379,6 +379,35 @@ def test_a_teammates_target_is_never_shared() -> None:
     assert policy.target is None or np.hypot(*(policy.target - alone.target)) >= 1.0
 
 
+@pytest.mark.parametrize(
+    ("teammate", "contest", "takes_it"),
+    [
+        ((13.0, 2.5), True, True),  # the teammate is 6 m from its target, the robot 3.5 m
+        ((13.0, 2.5), False, False),
+        ((7.0, 1.0), True, False),  # the teammate is 1.5 m from it: its own
+    ],
+)
+def test_a_teammates_target_is_its_own_only_while_it_is_as_near(
+    teammate: tuple[float, float], contest: bool, takes_it: bool
+) -> None:
+    # Only the east doorway is left and a teammate heads there. Regression (maze seed 3,
+    # oracle): the robot nearer to the last frontier yielded it to a teammate 15 m away
+    # and waited 22 s. With contest_targets the nearer robot keeps it; a farther one
+    # still leaves it to the teammate (and waits).
+    grid = two_rooms()
+    grid.cells[40:60, 20] = OCCUPIED  # close the west doorway
+    east_door = np.array([7.0, 2.475])
+    policy = ExplorerPolicy(np.random.default_rng(0), ExplorerConfig(contest_targets=contest))
+    policy.set_teammates(np.array([teammate]))
+    policy.set_teammate_targets(east_door[None])
+    policy.act({"pose": np.array([3.5, 2.5, 0.0])}, grid)
+    if takes_it:
+        assert policy.status == "exploring" and policy.target is not None
+        assert np.hypot(*(policy.target - east_door)) < 1.0
+    else:
+        assert policy.status == "waiting" and policy.target is None
+
+
 @pytest.mark.parametrize("separation", [4.0, 8.0])
 def test_only_frontiers_near_a_teammates_target_are_taken(separation: float) -> None:
     # The teammate heads for the west doorway; the east one, 6 m away, stays available
