@@ -15,13 +15,21 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
+from mrslam_env.config import RobotConfig
 from mrslam_env.geometry import compose, inverse, transform_points, wrap_scalar
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap, grid_footprint, resample_cells
+from mrslam_env.sim.starts import reachable_floor
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
+from mrslam_env.slam.config import GridConfig
 
 FloatArray = NDArray[np.float64]
 
+PLANNER_MARGIN = 0.08
+"""The frontier planner's safety margin beyond the robot radius, m
+(``agents.planning.PlannerConfig.safety_margin``; mrslam_env does not import agents)."""
+
 __all__ = [
+    "PLANNER_MARGIN",
     "CoverageEvaluator",
     "absolute_trajectory_error",
     "cell_agreement",
@@ -178,11 +186,13 @@ def cell_agreement(m1: GridMap, m2: GridMap, map1_from_map2: FloatArray) -> floa
 class CoverageEvaluator:
     """How much of the free area maps cover, judged against the ground truth.
 
-    The evaluation points are the free cells of a ground-truth raster of the world that
-    the robots could ever reach from ``starts``
-    (:func:`mrslam_env.env.observable_cells`), as world points; a map covers a point when
-    the cell under it is known (FREE or OCCUPIED) once the map is put in the world by its
-    true frame.
+    The evaluation points are the free cells of a ground-truth raster of the world that a
+    robot can get to from ``starts`` through passages its planner plans through, as world
+    points: those with a cell of :func:`mrslam_env.sim.starts.reachable_floor` under them,
+    computed at the planner's own figures (clearance ``radius + margin``, on a raster of
+    ``reach_resolution``, the SLAM map's cell). Floor behind narrower gaps does not count,
+    even where the lidar sees it through the gap. A map covers a point when the cell under
+    it is known (FREE or OCCUPIED) once the map is put in the world by its true frame.
 
     Parameters
     ----------
@@ -190,17 +200,42 @@ class CoverageEvaluator:
     starts : ndarray, shape (n, 3)
         The robots' true start poses, world frame.
     resolution : float
-        Cell size of the raster, m.
+        Cell size of the raster of evaluation points, m.
+    radius : float
+        The robots' radius, m (the default robot's by default).
+    margin : float
+        Clearance beyond the radius a passage needs, m: the frontier planner's
+        ``PlannerConfig.safety_margin`` (agents/planning.py; a test keeps them equal).
+    reach_resolution : float
+        Cell size of the raster the reachable floor is found on, m: the SLAM map's
+        (``GridConfig.resolution``), which the planner plans on.
     """
 
-    def __init__(self, world: WorldSpec, starts: FloatArray, resolution: float = 0.1) -> None:
-        # Imported here: the env module brings PettingZoo and pymunk, which scoring a map
-        # does not otherwise need.
-        from mrslam_env.env import observable_cells
-
+    def __init__(
+        self,
+        world: WorldSpec,
+        starts: FloatArray,
+        resolution: float = 0.1,
+        *,
+        radius: float = RobotConfig().radius,
+        margin: float = PLANNER_MARGIN,
+        reach_resolution: float = GridConfig().resolution,
+    ) -> None:
         raster = ground_truth_map(world, resolution, margin=1.0)
-        free = observable_cells(raster, np.asarray(starts, dtype=np.float64)) & raster.free
-        self.points = raster.cell_to_world(np.argwhere(free))
+        fine = ground_truth_map(world, reach_resolution, margin=1.0)
+        poses = np.asarray(starts, dtype=np.float64).reshape(-1, 3)
+        seeds = fine.world_to_cell(poses[:, :2])
+        floor = reachable_floor(fine.free, fine.occupied, reach_resolution, radius, seeds, margin)
+        points = raster.cell_to_world(np.argwhere(raster.free))
+        # A point counts when the reachable floor holds any fine cell of its cell.
+        keep = np.zeros(len(points), dtype=bool)
+        quarter = resolution / 4
+        for dx in (-quarter, quarter):
+            for dy in (-quarter, quarter):
+                cells = fine.world_to_cell(points + np.array([dx, dy]))
+                inside = fine.contains(cells)
+                keep[inside] |= floor[cells[inside, 0], cells[inside, 1]]
+        self.points = points[keep]
 
     def known(self, grid: GridMap, world_from_map: ArrayLike) -> NDArray[np.bool_]:
         """Which evaluation points ``grid`` knows, (P,) bool."""

@@ -10,7 +10,12 @@ import numpy as np
 import pytest
 from merge_fixtures import in_frame, room_map
 
-from mrslam_env.evaluation import CoverageEvaluator, relative_transform_error, true_overlap
+from mrslam_env.evaluation import (
+    PLANNER_MARGIN,
+    CoverageEvaluator,
+    relative_transform_error,
+    true_overlap,
+)
 from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import UNKNOWN, GridMap
 from mrslam_env.registry import build_world
@@ -124,3 +129,32 @@ def test_coverage_counts_only_the_free_space_the_robots_can_reach() -> None:
     assert np.all(world.clearance(evaluator.points) > 0)
     empty = GridMap(cells=np.full((5, 5), UNKNOWN, dtype=np.int8), resolution=0.1)
     assert evaluator.coverage([empty], [np.zeros(3)]) == 0.0
+
+
+def test_coverage_counts_only_the_floor_behind_passages_the_planner_uses() -> None:
+    # Two rooms joined by a 0.5 m gap: a robot of radius 0.2 fits, but the planner keeps
+    # its safety margin clear and never plans through it. The second room's floor counts
+    # only for a strip past the gap; with a 1 m door, all of it.
+    counted = {}
+    for gap in (0.5, 1.0):
+        low, high = 1.3 - gap / 2, 1.3 + gap / 2
+        walls = [
+            box(0, 0, 8, 0.1),
+            box(0, 2.5, 8, 2.6),
+            box(0, 0, 0.1, 2.6),
+            box(7.9, 0, 8, 2.6),
+            box(2.5, 0.1, 2.6, low),
+            box(2.5, high, 2.6, 2.5),
+        ]
+        world = WorldSpec.from_walls("rooms", walls, [(1.0, 1.0, 0.0)])
+        points = CoverageEvaluator(world, world.starts).points
+        counted[gap] = int(np.count_nonzero(points[:, 0] > 2.6))
+        assert np.count_nonzero(points[:, 0] < 2.5) == 24 * 24  # the first room, whole
+    assert counted[1.0] == 53 * 24  # the second room, whole
+    assert 0 < counted[0.5] < 0.1 * counted[1.0]
+
+
+def test_the_coverage_margin_is_the_planners() -> None:
+    from agents.planning import PlannerConfig
+
+    assert PlannerConfig().safety_margin == PLANNER_MARGIN

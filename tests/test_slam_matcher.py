@@ -31,7 +31,14 @@ from mrslam_env.slam.matcher import (
     refine_pose,
     translational_condition,
 )
-from mrslam_env.slam.scan import NORMAL_HALF_WIDTH, NORMAL_MAX_GAP, scan_normals, scan_points
+from mrslam_env.slam.scan import (
+    NORMAL_HALF_WIDTH,
+    NORMAL_MAX_GAP,
+    NORMAL_MAX_HALF_WIDTH,
+    NORMAL_MIN_SPAN,
+    scan_normals,
+    scan_points,
+)
 
 
 def room_world() -> WorldSpec:
@@ -70,10 +77,15 @@ def reference_normals(ranges: np.ndarray) -> np.ndarray:
     valid = (ranges >= 0.05) & (ranges < 8.0)
     normals = np.zeros((n, 2))
     for i in np.flatnonzero(valid):
-        limit = NORMAL_MAX_GAP + 2.0 * ranges[i] * (2 * np.pi / n)
+        spacing = ranges[i] * (2 * np.pi / n)
+        limit = NORMAL_MAX_GAP + max(2.0 * spacing, NORMAL_MIN_SPAN / 2)
+        # As many beams either side as span NORMAL_MIN_SPAN, at least NORMAL_HALF_WIDTH.
+        reach = NORMAL_HALF_WIDTH
+        while reach < NORMAL_MAX_HALF_WIDTH and 2 * reach * spacing < NORMAL_MIN_SPAN:
+            reach += 1
         members = [
             points[j]
-            for j in ((i + k) % n for k in range(-NORMAL_HALF_WIDTH, NORMAL_HALF_WIDTH + 1))
+            for j in ((i + k) % n for k in range(-reach, reach + 1))
             if valid[j] and np.linalg.norm(points[j] - points[i]) <= limit
         ]
         if len(members) < 3:
@@ -117,6 +129,27 @@ def test_normals_of_a_wall_are_its_normal() -> None:
     np.testing.assert_allclose(normals[90], [0.0, 1.0], atol=1e-9)
     # Beam 0 points at -180°: onto the wall x = 0, facing +x.
     np.testing.assert_allclose(normals[0], [1.0, 0.0], atol=1e-9)
+
+
+def test_normals_of_a_rasterised_diagonal_wall_follow_the_wall_not_its_steps() -> None:
+    # A 45° wall drawn as 5 cm steps (a wall of a map built into a world), 0.32 m from
+    # the sensor. Five beams span 2 cm there: they fit single steps, 45° off the wall.
+    # Fitted over NORMAL_MIN_SPAN of surface, the normals are the wall's.
+    steps = [box(0.05 * i, 0.05 * i + 0.45, 0.05 * i + 0.1, 0.05 * i + 0.5) for i in range(-40, 41)]
+    world = WorldSpec.from_walls("steps", steps, [[0.0, 0.0, 0.0]])
+    ranges = cast_scan(0.0, 0.0, 0.0, 360, 8.0, world.segments, NO_DISCS)
+    near = ranges < 1.0
+    wall_normal = np.array([1.0, -1.0]) / math.sqrt(2.0)
+    for span, median_max, defined_min in ((0.0, None, None), (NORMAL_MIN_SPAN, 2.0, 1.0)):
+        normals = scan_normals(ranges, 8.0, 0.05, min_span=span)[near]
+        defined = np.any(normals != 0, axis=1)
+        off = np.degrees(np.arccos(np.clip(normals[defined] @ wall_normal, -1.0, 1.0)))
+        if median_max is None:
+            assert np.median(off) > 30.0  # the steps' faces
+        else:
+            assert defined.mean() >= defined_min
+            assert np.median(off) < median_max
+            assert np.percentile(off, 90) < 5.0
 
 
 # --- interpolation ---------------------------------------------------------------------------

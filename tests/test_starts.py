@@ -17,6 +17,7 @@ from mrslam_env.sim.starts import (
     START_MARGIN,
     START_RESOLUTION,
     cell_clearance,
+    reachable_floor,
     start_cells,
     world_start_points,
 )
@@ -122,6 +123,43 @@ def test_only_passages_the_planner_can_use_join_the_regions(gap: float, joined: 
     assert np.any(points[:, 0] < 2.5)
     assert np.any(points[:, 0] > 2.6) == joined
     assert PlannerConfig().safety_margin <= PASSAGE_MARGIN
+
+
+@pytest.mark.parametrize(("gap", "joined"), [(0.5, False), (1.0, True)])
+def test_the_reachable_floor_ends_at_gaps_the_planner_never_uses(gap: float, joined: bool) -> None:
+    # The same two rooms: behind a 0.5 m gap only a strip of floor counts (sqrt(2) times
+    # the radius plus PASSAGE_MARGIN, plus a cell, past the gap); behind a 1 m door the
+    # whole second room does, into its corners.
+    low, high = 1.3 - gap / 2, 1.3 + gap / 2
+    world = enclosure(
+        width=8.0, height=2.6, extra=[box(2.5, 0.1, 2.6, low), box(2.5, high, 2.6, 2.5)]
+    )
+    grid = ground_truth_map(world, 0.1, margin=0.1)
+    seeds = grid.world_to_cell(world.starts[:, :2])
+    floor = reachable_floor(grid.free, grid.occupied, 0.1, R, seeds)
+    x, y = grid.cell_to_world(np.argwhere(grid.free)).T
+    counted = floor[grid.free]
+    indoors = (x > 0.1) & (x < 7.9) & (y > 0.1) & (y < 2.5)
+    assert not counted[~indoors].any()  # the free raster margin outside the walls
+    assert counted[indoors & (x < 2.5)].all()  # the first room, corners included
+    second = indoors & (x > 2.6)
+    if joined:
+        assert counted[second].all()
+    else:
+        reach = math.sqrt(2.0) * (R + PASSAGE_MARGIN) + 0.2
+        assert counted[second & (x > 2.6 + reach)].sum() == 0
+        assert 0 < counted[second].sum() < 0.2 * second.sum()
+
+
+def test_a_seed_where_nothing_is_passable_counts_its_free_component() -> None:
+    world = enclosure(width=4.0, height=3.0)
+    grid = ground_truth_map(world, 0.1, margin=0.1)
+    seeds = grid.world_to_cell(world.starts[:, :2])
+    floor = reachable_floor(grid.free, grid.occupied, 0.1, 2.0, seeds)  # a 2 m robot
+    x, y = grid.cell_to_world(np.argwhere(grid.free)).T
+    indoors = (x > 0.1) & (x < 3.9) & (y > 0.1) & (y < 2.9)
+    assert indoors.any()
+    assert np.array_equal(floor[grid.free], indoors)
 
 
 def test_world_start_points_have_clearance_and_stay_connected() -> None:

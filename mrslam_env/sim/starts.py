@@ -39,6 +39,7 @@ __all__ = [
     "START_MARGIN",
     "START_RESOLUTION",
     "cell_clearance",
+    "reachable_floor",
     "start_cells",
     "world_start_points",
 ]
@@ -121,6 +122,64 @@ def start_cells(
             return np.zeros(clearance.shape, dtype=bool)
         label = int(labels[row, col])
     return (labels == label) & (clearance >= radius + START_MARGIN)
+
+
+def reachable_floor(
+    free: ArrayLike,
+    walls: ArrayLike,
+    resolution: float,
+    radius: float,
+    seeds: ArrayLike,
+    margin: float = PASSAGE_MARGIN,
+) -> BoolArray:
+    """The floor a robot of ``radius`` can get to from the ``seeds`` cells, by the passage
+    rule of the starts (module docstring) with clearance ``radius + margin``: the free
+    cells within ``sqrt(2) (radius + margin)`` plus one cell, through free cells, of the
+    regions of *passable* cells (4-connected, clearance estimate at least ``radius +
+    margin``) that hold a seed. So a room's floor counts up to its walls and into its
+    corners, but a room (or alcove) joined to the seeds' regions only through gaps
+    narrower than that counts only for that distance past its gap. A seed outside every
+    passable region (a hand-placed start in a tight spot) contributes its whole free
+    8-connected component instead.
+
+    Parameters
+    ----------
+    free : array_like of bool, shape (rows, cols)
+        Free (floor) cells.
+    walls : array_like of bool, shape (rows, cols)
+        Wall cells (see :func:`cell_clearance`).
+    resolution : float
+        Cell size, m.
+    radius : float
+        Robot radius, m (>= 0).
+    seeds : array_like of int, shape (k, 2)
+        ``(row, col)`` of the starts; those off the raster are ignored.
+    margin : float
+        Clearance beyond the radius a passage needs, m (default ``PASSAGE_MARGIN``).
+
+    Returns
+    -------
+    ndarray of bool, shape (rows, cols)
+    """
+    free = np.asarray(free, dtype=bool)
+    clear = radius + margin
+    labels, _ = ndimage.label(cell_clearance(walls, resolution) >= clear)
+    components, _ = ndimage.label(free, structure=np.ones((3, 3), dtype=bool))
+    rows, cols = free.shape
+    cells = np.asarray(seeds, dtype=np.int64).reshape(-1, 2)
+    inside = (cells[:, 0] >= 0) & (cells[:, 0] < rows) & (cells[:, 1] >= 0) & (cells[:, 1] < cols)
+    cells = cells[inside]
+    passable = labels[cells[:, 0], cells[:, 1]]
+    region = np.isin(labels, passable[passable > 0])
+    if region.any():
+        steps = int(np.ceil(np.sqrt(2.0) * clear / resolution)) + 1
+        region = ndimage.binary_dilation(
+            region, structure=np.ones((3, 3), dtype=bool), iterations=steps, mask=free
+        )
+    tight = cells[passable == 0]
+    loose = components[tight[:, 0], tight[:, 1]]
+    region |= np.isin(components, loose[loose > 0])
+    return region & free
 
 
 def world_start_points(world: WorldSpec, radius: float, reachable_from: ArrayLike) -> FloatArray:

@@ -17,6 +17,8 @@ FloatArray = NDArray[np.float64]
 __all__ = [
     "NORMAL_HALF_WIDTH",
     "NORMAL_MAX_GAP",
+    "NORMAL_MAX_HALF_WIDTH",
+    "NORMAL_MIN_SPAN",
     "mask_returns_near",
     "scan_normals",
     "scan_points",
@@ -24,7 +26,21 @@ __all__ = [
 ]
 
 NORMAL_HALF_WIDTH = 2
-"""Neighbours either side (beams) that :func:`scan_normals` fits a line through."""
+"""Neighbours either side (beams) that :func:`scan_normals` fits a line through, at
+least."""
+
+NORMAL_MIN_SPAN = 0.2
+"""Length of surface (m) a normal is fitted over, at least: near the sensor, where beams
+are closer than ``NORMAL_MIN_SPAN / (2 NORMAL_HALF_WIDTH)``, :func:`scan_normals` takes more
+neighbours (up to ``NORMAL_MAX_HALF_WIDTH`` either side), so that texture shorter than
+this (the 5 cm steps of a wall rasterised from a map, clutter) does not set a surface's
+direction. With five beams (2 cm at 0.3 m), a rasterised diagonal wall seen close gave
+the normals of single steps, or none (not line-like), and the matcher drifted up to 1.8°
+in heading along such a corridor (docs/decisions.md, "Onboard SLAM")."""
+
+NORMAL_MAX_HALF_WIDTH = 16
+"""Cap on the neighbours either side that ``NORMAL_MIN_SPAN`` may ask for (reached within
+0.36 m of a 1° lidar)."""
 
 NORMAL_MAX_GAP = 0.05
 """Neighbours further apart than this (m) plus twice the beam spacing at the return's range
@@ -59,12 +75,16 @@ def scan_normals(
     min_range: float,
     half_width: int = NORMAL_HALF_WIDTH,
     max_gap: float = NORMAL_MAX_GAP,
+    min_span: float = NORMAL_MIN_SPAN,
+    max_half_width: int = NORMAL_MAX_HALF_WIDTH,
 ) -> FloatArray:
     """Unit surface normals (N, 2) of a scan's returns, sensor frame, facing the sensor.
 
     The normal of a return is the direction of least spread (total least squares) of it
-    and its returning neighbours up to ``half_width`` beams either side that lie within
-    ``max_gap`` m plus twice the beam spacing at its range, turned to face the sensor.
+    and its returning neighbours up to ``half_width`` beams either side (more where the
+    beams are close: as many as span ``min_span`` m of surface, capped at
+    ``max_half_width``) that lie within ``max_gap`` m plus twice the beam spacing at its
+    range (or plus ``min_span / 2``, if that is more), turned to face the sensor.
     Beams without a return, returns with fewer than two such neighbours, and returns whose
     neighbourhood is not line-like (spread across above a quarter of the spread along) get
     ``(0, 0)``. Row i belongs to beam i (not compacted like :func:`scan_points`).
@@ -85,10 +105,12 @@ def scan_normals(
     for i in range(n):
         if not valid[i]:
             continue
-        limit = max_gap + 2.0 * ranges[i] * dtheta
+        spacing = ranges[i] * dtheta
+        limit = max(max_gap + 2.0 * spacing, max_gap + 0.5 * min_span)
+        reach = max(half_width, min(math.ceil(0.5 * min_span / spacing), max_half_width))
         sx = sy = sxx = syy = sxy = 0.0
         members = 0
-        for k in range(-half_width, half_width + 1):
+        for k in range(-reach, reach + 1):
             j = (i + k) % n
             if not valid[j]:
                 continue
