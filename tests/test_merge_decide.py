@@ -22,6 +22,7 @@ import pytest
 from merge_fixtures import room_map
 from scipy import ndimage
 
+from mrslam_env.geometry import transform_points
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
 from mrslam_env.merge.decide import (
     CANDIDATE_CHECKS,
@@ -38,10 +39,17 @@ from mrslam_env.merge.decide import (
     rule_small_overlap_fits_tightly,
     rule_unambiguous,
     settled,
+    switching_rival,
     unsettled_rival,
 )
 from mrslam_env.merge.dissimilarity import Agreement, WallMatch, acceptance_index, wall_match
-from mrslam_env.merge.pipeline import MergeConfig, ScoredHypothesis, _prepare, _settle
+from mrslam_env.merge.pipeline import (
+    MergeConfig,
+    ScoredHypothesis,
+    _prepare,
+    _settle,
+    twin_proposal,
+)
 
 RESOLUTION = 0.1  # m: one cell is 0.01 m²
 PIVOT = np.array([0.0, 0.0])
@@ -579,3 +587,110 @@ def test_the_pipeline_rejudges_the_best_and_its_rivals_when_settle_is_on() -> No
     decision = decide(rejudged, CONFIG)
     assert decision.chosen is best
     assert "settled at the input resolution" in decision.reason
+
+
+# -- rival switching (switch_ratio) and the mirrored twin ----------------------------------------
+
+
+def _switch_missed(ratio: float) -> int:
+    """Unmatched wall cells of a best that misses just over ``ratio`` times the share of a
+    rival missing 99 of 1,000 (``(m + 1) / 1001`` against ``100 / 1001``)."""
+    return math.ceil(ratio * 100 - 1e-9)
+
+
+def test_a_rival_missing_far_fewer_walls_takes_the_best_place() -> None:
+    # The best turned by 180° about the same centre scores a little more at the working
+    # resolution; at the input resolution it misses switch_ratio times the rival's share.
+    ratio = CONFIG.switch_ratio
+    assert 1.0 < ratio < CONFIG.settle_ratio
+    rival = replace(_candidate(0.0, score=95.0), fine_walls=_walls(99))
+    best = replace(_candidate(0.0, math.pi, score=100.0), fine_walls=_walls(_switch_missed(ratio)))
+    assert switching_rival([best, rival], PIVOT, CONFIG) is rival
+    # just short of the ratio: no switch, and the answer stays ambiguous
+    short = replace(best, fine_walls=_walls(_switch_missed(ratio) - 2))
+    assert switching_rival([short, rival], PIVOT, CONFIG) is None
+    assert _refused_by(_candidates(short, rival))[0] == "rule_unambiguous"
+    # never without both re-judged, nor for a rival placing another part of the maps
+    assert switching_rival([replace(best, fine_walls=None), rival], PIVOT, CONFIG) is None
+    far = replace(_candidate(6.0, score=95.0), fine_walls=_walls(99))
+    assert switching_rival([best, far], PIVOT, CONFIG) is None
+
+
+def test_the_switched_rival_is_accepted_over_the_best_it_replaced() -> None:
+    # Once in front, the rival is judged like any best: the best it replaced (scoring
+    # more at the working resolution) is settled by the comparison that switched them;
+    # a third rival still needs settle_ratio times the new best's share.
+    ratio = CONFIG.switch_ratio
+    rival = replace(_candidate(0.0, score=95.0), fine_walls=_walls(99))
+    best = replace(_candidate(0.0, math.pi, score=100.0), fine_walls=_walls(_switch_missed(ratio)))
+    assert settled(rival, best, PIVOT, CONFIG)
+    decision = decide(_candidates(rival, best), CONFIG)
+    assert decision.chosen is rival
+    turned = replace(_candidate(0.0, math.pi / 2, score=90.0), fine_walls=_walls(300))
+    assert _refused_by(_candidates(rival, best, turned))[0] == "rule_unambiguous"
+    settled_turned = replace(turned, fine_walls=_walls(600))
+    assert decide(_candidates(rival, best, settled_turned), CONFIG).chosen is rival
+
+
+def test_the_rival_missing_the_fewest_walls_is_the_one_switched_to() -> None:
+    best = replace(_candidate(0.0, math.pi, score=100.0), fine_walls=_walls(900))
+    worse = replace(_candidate(0.0, math.pi / 2, score=98.0), fine_walls=_walls(300))
+    fewest = replace(_candidate(0.3, score=95.0), fine_walls=_walls(50))
+    assert switching_rival([best, worse, fewest], PIVOT, CONFIG) is fewest
+
+
+def test_the_pipeline_switches_to_a_rival_that_lays_the_walls_on_each_other() -> None:
+    # The room with its stub, thick-walled in map 2, with the room turned by 180° ranked
+    # best and the truth its rival: re-judged at 0.05 m, the turned room leaves the stub
+    # unmatched, the truth takes its place and is accepted. Without switching (ratio
+    # inf) the answer stays ambiguous.
+    m1 = room_map()
+    m2 = _thick(m1)
+    rows, cols = m1.cells.shape
+    turned = np.array([cols * m1.resolution, rows * m1.resolution, math.pi])
+    candidates = replace(
+        _candidates(
+            replace(_candidate(0.0, score=100.0), map1_from_map2=turned),
+            replace(_candidate(0.0, score=95.0), map1_from_map2=np.zeros(3)),
+            reasons=["", ""],
+        ),
+        pivot=np.array([2.0, 1.5]),
+    )
+    work = _prepare(m1, m2, CONFIG)
+    never = replace(CONFIG, switch_ratio=math.inf)
+    kept = _settle(m1, m2, work, candidates, never, np.random.default_rng(0))
+    assert np.allclose(kept.hypotheses[0].map1_from_map2, turned, atol=0.1)
+    assert _refused_by(kept, never)[0] == "rule_unambiguous"
+    switched = _settle(m1, m2, work, candidates, CONFIG, np.random.default_rng(0))
+    decision = decide(switched, CONFIG)
+    assert decision.chosen is switched.hypotheses[0]
+    assert np.allclose(decision.chosen.map1_from_map2, np.zeros(3), atol=0.1)
+
+
+def test_the_twin_turns_the_best_by_180_degrees_about_the_pivot() -> None:
+    pivot = np.array([2.0, 1.0])
+    best = _candidate(0.5, 0.3)
+    twin = twin_proposal([best], pivot, CONFIG)
+    assert twin is not None
+    assert twin[2] == pytest.approx(0.3 - math.pi)
+    point = pivot[None, :]
+    assert np.allclose(transform_points(twin, point), transform_points(best.map1_from_map2, point))
+    # already judged: not proposed again
+    judged = replace(_candidate(0.0), map1_from_map2=twin + np.array([0.1, 0.0, 0.05]))
+    assert twin_proposal([best, judged], pivot, CONFIG) is None
+
+
+@pytest.mark.parametrize("ratio", [1.0, 0.5, math.nan, True])
+def test_switch_ratio_must_exceed_one(ratio: float) -> None:
+    with pytest.raises(ValueError, match=r"MergeConfig.switch_ratio must be a number > 1"):
+        MergeConfig(switch_ratio=ratio)
+
+
+def test_an_accepted_switch_says_whose_place_it_took() -> None:
+    rival = replace(_candidate(0.0, score=95.0), fine_walls=_walls(99))
+    best = replace(_candidate(0.0, math.pi, score=100.0), fine_walls=_walls(300))
+    decision = decide(_candidates(rival, best), CONFIG)
+    assert decision.reason == (
+        "score 95.0 m², next confident candidate 100.0 m², settled at the input resolution "
+        "(walls missed 10.0%, rivals 30.1% or more), in place of a candidate scoring 100.0 m²"
+    )

@@ -192,10 +192,11 @@ def test_result_reports_ranked_hypotheses_and_timings(overlapping: MergedPair) -
     for hypothesis in result.hypotheses:
         assert 0.0 <= hypothesis.acceptance_index <= 1.0
         assert 0.0 <= hypothesis.overlap <= 1.0
-        # Symmetry proposals (the aliasing check), wall-correlation and Hough placements
-        # come from no virtual run.
+        # Symmetry proposals (the aliasing check), the best's mirrored twin, wall-correlation
+        # and Hough placements come from no virtual run.
         assert (hypothesis.votes >= 1) == (hypothesis.proposed_by == "virtual robot")
-        assert hypothesis.proposed_by in ("virtual robot", "correlation", "hough", "symmetry")
+        sources = ("virtual robot", "correlation", "hough", "symmetry", "twin")
+        assert hypothesis.proposed_by in sources
         assert hypothesis.map1_from_map2.shape == (3,)
     assert result.agreement is not None and result.agreement.index >= 0.9
     stages = set(result.seconds)

@@ -56,6 +56,7 @@ __all__ = [
     "rule_unambiguous",
     "same_answer",
     "settled",
+    "switching_rival",
     "unsettled_rival",
 ]
 
@@ -70,7 +71,8 @@ class Candidates:
     ----------
     hypotheses : list of ScoredHypothesis
         The refined and judged candidates, ranked: confident ones first, each group by
-        decreasing score.
+        decreasing score; a rival that the settling switched to
+        (:func:`switching_rival`) is moved in front.
     reasons : list of str
         For each hypothesis, why it is not confident (a :func:`judge` check or
         :func:`refute`); ``""`` for a confident one.
@@ -300,7 +302,10 @@ def settled(
     ``pivot``, m2's known centre, within ``settle_distance`` of where the best puts it,
     turned by any angle), and it misses at least ``settle_ratio`` times the best's share
     of walls (:attr:`~mrslam_env.merge.dissimilarity.WallMatch.missed`: each map's wall
-    cells with no wall of the other within one cell, the worse of the two maps).
+    cells with no wall of the other within one cell, the worse of the two maps). A rival
+    that scores more than the best at the working resolution is the best that
+    :func:`switching_rival` replaced; it is settled from ``switch_ratio`` times the best's
+    share, the comparison that made the switch.
 
     At the working resolution (0.1 m or coarser) a placement turned by 90° in a
     near-symmetric arena keeps its walls within the two-cell tolerance of the other
@@ -321,7 +326,41 @@ def settled(
         return False
     if not same_part(best, rival, pivot, config):
         return False
-    return rival.fine_walls.missed >= config.settle_ratio * best.fine_walls.missed
+    # a rival that outscores the best is the best it replaced (switching_rival): the
+    # comparison that made the switch settles it
+    ratio = config.switch_ratio if rival.score > best.score else config.settle_ratio
+    return rival.fine_walls.missed >= ratio * best.fine_walls.missed
+
+
+def switching_rival(
+    scored: list[ScoredHypothesis], pivot: FloatArray, config: MergeConfig
+) -> ScoredHypothesis | None:
+    """The rival that takes the best's place (``scored[0]``), or None: the mirror of
+    :func:`settled`. Of the best's :func:`ambiguous_rivals` that were re-judged at the
+    input resolution and place the same part of the maps (:func:`same_part`), the one
+    missing the smallest share of walls, when the best misses at least ``switch_ratio``
+    times that share (:attr:`~mrslam_env.merge.dissimilarity.WallMatch.missed`).
+
+    In a near-symmetric arena the placement turned by 180° about the same centre may
+    score best at the working resolution while the truth is its rival; at the input
+    resolution the truth lays the walls of both maps on each other and the turned
+    placement does not. The switched rival is then judged by every rule like any best
+    (its own rivals, coverage, small overlap). ``switch_ratio`` chosen on and confirmed
+    on: docs/decisions.md, "Rival switching".
+    """
+    best = scored[0]
+    if best.fine_walls is None:
+        return None
+    chosen: ScoredHypothesis | None = None
+    for rival in ambiguous_rivals(scored, pivot, config):
+        walls = rival.fine_walls
+        if walls is None or not same_part(best, rival, pivot, config):
+            continue
+        if best.fine_walls.missed < config.switch_ratio * walls.missed:
+            continue
+        if chosen is None or chosen.fine_walls is None or walls.missed < chosen.fine_walls.missed:
+            chosen = rival
+    return chosen
 
 
 def same_part(
@@ -493,4 +532,7 @@ def decide(candidates: Candidates, config: MergeConfig) -> Decision:
             f", settled at the input resolution (walls missed {best.fine_walls.missed:.1%}, "
             f"rivals {least:.1%} or more)"
         )
+        replaced = [r for r in rivals if r.score > best.score]
+        if replaced:  # switching_rival put it in front
+            margin += f", in place of a candidate scoring {replaced[0].score:.1f} m²"
     return Decision(chosen=best, reason=f"score {best.score:.1f} m²{margin}", rule=None)

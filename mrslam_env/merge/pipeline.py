@@ -44,6 +44,7 @@ from mrslam_env.merge.decide import (
     refute,
     same_answer,
     same_part,
+    switching_rival,
     unsettled_rival,
 )
 from mrslam_env.merge.dissimilarity import (
@@ -263,6 +264,17 @@ class MergeConfig:
     angle). Walls at the input resolution compare two placements of the same overlap;
     a placement of another part (the mirrored wing, the next aisle) explains its own
     overlap and may fit as well as the truth (docs/decisions.md)."""
+    switch_ratio: float = 1.5
+    """The mirror of ``settle_ratio``: when the settling re-judges the best and a rival that
+    places the same part of the maps (``settle_distance``) and the *best* misses at least
+    this many times the rival's share of walls at the input resolution, the rival takes
+    the best's place (:func:`~mrslam_env.merge.decide.switching_rival`); every rule then
+    applies to it as to any best (docs/decisions.md, "Rival switching")."""
+    twin_rival: bool = True
+    """With a confident best candidate, its mirrored twin (m2 turned by 180° about its known
+    centre, which lands where the best puts it; :func:`twin_proposal`) is refined and
+    judged too, so that a near-symmetric building's twin is always among the rivals
+    (docs/decisions.md, "Rival switching")."""
     settle_walk: RandomWalkConfig = field(default_factory=lambda: _fine_walk(200))
     """The short refinement of each candidate re-judged at the input resolution: the final
     refinement's (``final_random_walk``) with a third of its iterations."""
@@ -320,6 +332,12 @@ class MergeConfig:
         require(name, "max_resolution_ratio", ratio, ratio >= 1.0, ">= 1")
         require(name, "cascade", self.cascade, isinstance(self.cascade, bool), "a bool")
         require(name, "settle", self.settle, isinstance(self.settle, bool), "a bool")
+        switch = self.switch_ratio
+        number = isinstance(switch, int | float) and not isinstance(switch, bool)
+        ok = number and switch > 1.0  # inf: never switch; NaN fails
+        require(name, "switch_ratio", switch, ok, "a number > 1 (inf: never switch)")
+        twin = self.twin_rival
+        require(name, "twin_rival", twin, isinstance(twin, bool), "a bool")
         clean = self.clean_conflict_length
         require(
             name,
@@ -375,8 +393,9 @@ class ScoredHypothesis:
         ``"virtual robot"`` (the hypothesis side), ``"correlation"`` (the wall
         correlation, :func:`~mrslam_env.merge.hypotheses.correlation_hypotheses`),
         ``"hough"`` (the same correlation at the Hough spectra's rotations,
-        :attr:`MergeConfig.hough_candidates`) or ``"symmetry"``
-        (:func:`symmetry_proposals`, the aliasing check).
+        :attr:`MergeConfig.hough_candidates`), ``"symmetry"``
+        (:func:`symmetry_proposals`, the aliasing check) or ``"twin"`` (the best turned
+        by 180° about m2's known centre, :func:`twin_proposal`).
     fine_walls : WallMatch or None
         When the candidate was re-judged at the input resolution to settle an ambiguity
         (:attr:`MergeConfig.settle`): its walls against the other map's there, after a
@@ -571,6 +590,26 @@ def symmetry_proposals(
         if not any(same_answer(repeat, k, pivot, config) for k in known + proposals):
             proposals.append(repeat)
     return proposals
+
+
+def twin_proposal(
+    scored: list[ScoredHypothesis], pivot: FloatArray, config: MergeConfig
+) -> FloatArray | None:
+    """The mirrored twin of the best candidate (``scored[0]``): m2 turned by 180° about
+    ``pivot`` (its known centre, m2's frame), which lands where the best puts it; None
+    when a candidate already gives that answer (:func:`same_answer`).
+
+    In a near-symmetric building (the hexagonal ``tb3_sandbox`` arena) the turned
+    placement may score best while the truth is never proposed; with the twin always
+    judged, the truth is then a rival that the settling can compare
+    (:attr:`MergeConfig.twin_rival`)."""
+    best = scored[0].map1_from_map2
+    flip = np.array([2.0 * pivot[0], 2.0 * pivot[1], math.pi])  # p -> 2 pivot - p
+    twin = compose(best, flip)
+    twin[2] = wrap_scalar(float(twin[2]))
+    if any(same_answer(twin, h.map1_from_map2, pivot, config) for h in scored):
+        return None
+    return twin
 
 
 # --- the stages --------------------------------------------------------------------------------
@@ -844,8 +883,12 @@ def _score(
     judged = _rank(judged, work.pivot, config)
     if judged and judged[0].hypothesis.confident:
         scored = [j.hypothesis for j in judged]
-        for transform in symmetry_proposals(scored, work.pivot, config):
-            judged.append(_score_candidate(work, transform, 0.0, 0, "symmetry", config, rng, trace))
+        extra = [(t, "symmetry") for t in symmetry_proposals(scored, work.pivot, config)]
+        twin = twin_proposal(scored, work.pivot, config) if config.twin_rival else None
+        if twin is not None and not any(same_answer(twin, t, work.pivot, config) for t, _ in extra):
+            extra.append((twin, "twin"))
+        for transform, source in extra:
+            judged.append(_score_candidate(work, transform, 0.0, 0, source, config, rng, trace))
         judged = _rank(judged, work.pivot, config)
     candidates = Candidates(
         hypotheses=[j.hypothesis for j in judged],
@@ -888,10 +931,13 @@ def _settle(
     them are refined there by ``settle_walk`` and their walls matched
     (:func:`~mrslam_env.merge.dissimilarity.wall_match`); the candidates come back with
     :attr:`ScoredHypothesis.fine_walls` set on those, for
-    :func:`~mrslam_env.merge.decide.settled`. Otherwise (no rival, or a rival placing
-    another part of the maps, ``settle_distance`` or more away, which is never settled)
-    they come back unchanged."""
-    hypotheses = candidates.hypotheses
+    :func:`~mrslam_env.merge.decide.settled`. When a rival then takes the best's place
+    (:func:`~mrslam_env.merge.decide.switching_rival`, ``switch_ratio``), it is moved to
+    the front and its own rivals are settled the same way (a rival misses strictly fewer
+    walls than the best it replaces, so this ends). Otherwise (no rival, or a rival
+    placing another part of the maps, ``settle_distance`` or more away, which is never
+    settled) they come back unchanged."""
+    hypotheses, reasons = list(candidates.hypotheses), list(candidates.reasons)
     if (
         not config.settle
         or not hypotheses
@@ -899,27 +945,37 @@ def _settle(
         or not _input_is_finer(m1, m2, work)
     ):
         return candidates
-    rivals = ambiguous_rivals(hypotheses, candidates.pivot, config)
-    if not rivals or not all(same_part(hypotheses[0], r, candidates.pivot, config) for r in rivals):
-        return candidates  # no rival, or one the input resolution cannot settle
-    f1, f2, d1, d2 = _input_grids(m1, m2, config.settle_walk.dissimilarity.wall_sides)
-    chosen = {id(h) for h in [hypotheses[0], *rivals]}
-    rejudged = []
-    for h in hypotheses:
-        if id(h) in chosen:
-            walk = refine_random_walk(
-                f1,
-                f2,
-                h.map1_from_map2,
-                config=config.settle_walk,
-                rng=rng,
-                distances1=d1,
-                distances2=d2,
-            )
-            transform = np.asarray(walk.transform, dtype=np.float64)
-            h = replace(h, fine_walls=wall_match(f1, f2, transform, distances1=d1, distances2=d2))
-        rejudged.append(h)
-    return replace(candidates, hypotheses=rejudged)
+    pivot = candidates.pivot
+    grids: tuple[GridMap, GridMap, DistanceMaps, DistanceMaps] | None = None
+    while True:
+        rivals = ambiguous_rivals(hypotheses, pivot, config)
+        if not rivals or not all(same_part(hypotheses[0], r, pivot, config) for r in rivals):
+            break  # no rival, or one the input resolution cannot settle
+        if grids is None:
+            grids = _input_grids(m1, m2, config.settle_walk.dissimilarity.wall_sides)
+        f1, f2, d1, d2 = grids
+        chosen = {id(h) for h in [hypotheses[0], *rivals] if h.fine_walls is None}
+        for index, h in enumerate(hypotheses):
+            if id(h) in chosen:
+                walk = refine_random_walk(
+                    f1,
+                    f2,
+                    h.map1_from_map2,
+                    config=config.settle_walk,
+                    rng=rng,
+                    distances1=d1,
+                    distances2=d2,
+                )
+                transform = np.asarray(walk.transform, dtype=np.float64)
+                walls = wall_match(f1, f2, transform, distances1=d1, distances2=d2)
+                hypotheses[index] = replace(h, fine_walls=walls)
+        switched = switching_rival(hypotheses, pivot, config)
+        if switched is None:
+            break
+        index = next(k for k, h in enumerate(hypotheses) if h is switched)
+        hypotheses.insert(0, hypotheses.pop(index))
+        reasons.insert(0, reasons.pop(index))
+    return replace(candidates, hypotheses=hypotheses, reasons=reasons)
 
 
 def _cheap_pass(
