@@ -122,7 +122,8 @@ class ExplorerConfig:
     this robot: when this robot's path cost to the target's frontier is below the
     straight-line distance from the teammate's last known position to its target, the
     target is not the teammate's (neither taken nor discounted) for this robot's choice.
-    False: a teammate's target is always its own."""
+    Off while a teammate has no target (whose target is whose is then not known; teams
+    of three or more). False: a teammate's target is always its own."""
     replan_interval: int = 25
     """Steps between routine replans."""
     min_replan_interval: int = 5
@@ -971,7 +972,7 @@ class ExplorerPolicy:
         if len(frontiers):
             # The search stops once no frontier left can beat the best one reached: the
             # choice, its path cost and its path are those of the whole search.
-            claims = self._claims(frontiers, cost_grid, pose)
+            claims = self._claims(frontiers, cost_grid, start)
             gains, excluded, current = self._utility_parts(frontiers, grid, claims)
             if config.team_allocation != "targets" and len(self._teammates):
                 # The whole search: the joint choice needs every goal's path cost.
@@ -1049,41 +1050,42 @@ class ExplorerPolicy:
         cells = world_to_cell(self._target_cells, self._grid_origin, self._grid_resolution)
         return _most_overlapping(frontiers.labels, cells)
 
-    def _claims(self, frontiers: Frontiers, cost_grid: CostGrid, pose: FloatArray) -> FloatArray:
+    def _claims(
+        self, frontiers: Frontiers, cost_grid: CostGrid, start: tuple[int, int]
+    ) -> FloatArray:
         """The teammates' targets this robot leaves to them, (K, 2): all of them, or with
         ``contest_targets`` those the teammate is as near to as this robot (its path cost
         to the nearest frontier goal within ``shared_target_radius`` of the target, against
-        the teammate's straight-line distance from its last known position)."""
+        the teammate's straight-line distance from its last known position). Contesting
+        needs to know whose each target is, so it is off while a teammate has no target
+        (teams of three or more)."""
         targets = self._teammate_targets
         config = self.config
         if not config.contest_targets or len(targets) == 0 or len(frontiers) == 0:
             return targets
         if len(self._teammates) != len(targets):
             return targets  # which target is whose is not known
-        try:
-            field = distance_field(cost_grid, pose, snap_distance=config.start_snap)
-        except ValueError:
-            return targets
-        rows, cols = frontiers.goal_cells.T
-        mine = field.cost[rows, cols]
         radius = self.shared_target_radius
         keep = np.ones(len(targets), dtype=bool)
         for k, (target, teammate) in enumerate(zip(targets, self._teammates, strict=True)):
             near = np.hypot(*(frontiers.goals - target).T) < radius
-            if near.any() and mine[near].min() < float(np.hypot(*(target - teammate))):
+            if not near.any():
+                continue
+            # The search stops at the nearest of these goals: its cost is exact.
+            cells = frontiers.goal_cells[near]
+            field = best_goal_field(cost_grid, start, cells, np.zeros(len(cells)), cost_weight=1.0)
+            if field.cost[cells[:, 0], cells[:, 1]].min() < float(np.hypot(*(target - teammate))):
                 keep[k] = False
         return targets[keep]
 
     def _utility_parts(
-        self, frontiers: Frontiers, grid: GridMap, claims: FloatArray | None = None
+        self, frontiers: Frontiers, grid: GridMap, targets: FloatArray
     ) -> tuple[FloatArray, NDArray[np.bool_], int]:
         """Per frontier, the path-cost-free parts of its utility: the gain after the
         teammates' discount (``team_discount``), whether it is excluded (a teammate's
         target, blacklisted), and the index of the current target's frontier (-1 if
-        none). ``claims``: the teammates' targets left to them (:meth:`_claims`; default
-        all)."""
+        none). ``targets``: the teammates' targets left to them (:meth:`_claims`)."""
         config = self.config
-        targets = self._teammate_targets if claims is None else claims
         if config.team_discount == "overlap":
             view_range = config.frontiers.sensor_range
             discount = team_discount(frontiers.goals, targets, view_range, grid)

@@ -229,9 +229,11 @@ class CoverageEvaluator:
         points = raster.cell_to_world(np.argwhere(raster.free))
         # A point counts when the reachable floor holds any fine cell of its cell.
         keep = np.zeros(len(points), dtype=bool)
-        quarter = resolution / 4
-        for dx in (-quarter, quarter):
-            for dy in (-quarter, quarter):
+        # The centres of the fine cells in a point's cell (k x k of them).
+        k = max(1, round(resolution / reach_resolution))
+        offsets = ((np.arange(k) + 0.5) / k - 0.5) * resolution
+        for dx in offsets:
+            for dy in offsets:
                 cells = fine.world_to_cell(points + np.array([dx, dy]))
                 inside = fine.contains(cells)
                 keep[inside] |= floor[cells[inside, 0], cells[inside, 1]]

@@ -392,7 +392,7 @@ def test_a_teammates_target_is_its_own_only_while_it_is_as_near(
 ) -> None:
     # Only the east doorway is left and a teammate heads there. Regression (maze seed 3,
     # oracle): the robot nearer to the last frontier yielded it to a teammate 15 m away
-    # and waited 22 s. With contest_targets the nearer robot keeps it; a farther one
+    # and waited 31 s. With contest_targets the nearer robot keeps it; a farther one
     # still leaves it to the teammate (and waits).
     grid = two_rooms()
     grid.cells[40:60, 20] = OCCUPIED  # close the west doorway

@@ -136,7 +136,7 @@ def test_the_reachable_floor_ends_at_gaps_the_planner_never_uses(gap: float, joi
     )
     grid = ground_truth_map(world, 0.1, margin=0.1)
     seeds = grid.world_to_cell(world.starts[:, :2])
-    floor = reachable_floor(grid.free, grid.occupied, 0.1, R, seeds)
+    floor = reachable_floor(grid.free, grid.occupied, 0.1, R, seeds, PASSAGE_MARGIN)
     x, y = grid.cell_to_world(np.argwhere(grid.free)).T
     counted = floor[grid.free]
     indoors = (x > 0.1) & (x < 7.9) & (y > 0.1) & (y < 2.5)
@@ -155,7 +155,8 @@ def test_a_seed_where_nothing_is_passable_counts_its_free_component() -> None:
     world = enclosure(width=4.0, height=3.0)
     grid = ground_truth_map(world, 0.1, margin=0.1)
     seeds = grid.world_to_cell(world.starts[:, :2])
-    floor = reachable_floor(grid.free, grid.occupied, 0.1, 2.0, seeds)  # a 2 m robot
+    # A 2 m robot.
+    floor = reachable_floor(grid.free, grid.occupied, 0.1, 2.0, seeds, PASSAGE_MARGIN)
     x, y = grid.cell_to_world(np.argwhere(grid.free)).T
     indoors = (x > 0.1) & (x < 3.9) & (y > 0.1) & (y < 2.9)
     assert indoors.any()

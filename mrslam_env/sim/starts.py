@@ -130,7 +130,7 @@ def reachable_floor(
     resolution: float,
     radius: float,
     seeds: ArrayLike,
-    margin: float = PASSAGE_MARGIN,
+    margin: float,
 ) -> BoolArray:
     """The floor a robot of ``radius`` can get to from the ``seeds`` cells, by the passage
     rule of the starts (module docstring) with clearance ``radius + margin``: the free
@@ -155,7 +155,8 @@ def reachable_floor(
     seeds : array_like of int, shape (k, 2)
         ``(row, col)`` of the starts; those off the raster are ignored.
     margin : float
-        Clearance beyond the radius a passage needs, m (default ``PASSAGE_MARGIN``).
+        Clearance beyond the radius a passage needs, m (the starts' rule uses
+        ``PASSAGE_MARGIN``).
 
     Returns
     -------
