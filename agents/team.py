@@ -184,6 +184,21 @@ class TeamConfig:
     """Steps a hypothesis from sightings waits for such a later meeting while the robots
     explore on; then both drive to meet at a place at least
     ``sighting_verify_distance`` from where it formed (the usual rendezvous)."""
+    undecided_wait: int | None = None
+    """Rivals wait (design §6): when the merge leaves two or more distinct confident
+    answers open, each of them but the merge's own answer (when its verdict was
+    ``merged``) is not driven to: it waits while the robots explore on, tested by every
+    sighting and rejected when it keeps the robots in plain sight unseen, as a
+    hypothesis from sightings is, until both robots have nothing left to explore, or for
+    at most this many steps (None: no limit; 0: driven to at once, as any other); then
+    both drive to meet. Meanwhile the maps are merged again as they grow, and a newer
+    merge's hypotheses take its place unless they give the same answer."""
+    departure_share: float = 0.0
+    """On a rendezvous drive, the robot with the shorter way to the meeting point explores
+    on for this share of the difference of the two ways (as time at the cruise speed)
+    before it leaves for it, instead of waiting there for the other (0, the default: both
+    leave at once). 0.5 (exploring, it may move away from the point as far as it went)
+    was measured no better (docs/decisions.md)."""
     teammate_memory: int = 50
     """While coordinating, a teammate's position and target as last received over the
     link are used for at most this many steps without the link (0: for ever); older,
@@ -202,6 +217,7 @@ class TeamConfig:
                 "max_meeting_cost",
                 "sight_margin",
                 "sighting_verify_distance",
+                "departure_share",
             ),
             positive=("peer_range",),
             counts=(
@@ -222,6 +238,9 @@ class TeamConfig:
         factor = self.regrow_factor
         ok = isinstance(factor, int | float) and math.isfinite(factor) and factor >= 1
         require(name, "regrow_factor", factor, ok, "a finite number >= 1")
+        wait = self.undecided_wait
+        ok = wait is None or (isinstance(wait, int) and not isinstance(wait, bool) and wait >= 0)
+        require(name, "undecided_wait", wait, ok, "None or a whole number >= 0")
         margin, peer_range = self.sight_margin, self.peer_range
         require(name, "sight_margin", margin, margin < peer_range, f"< peer_range ({peer_range})")
 
@@ -298,6 +317,13 @@ class _Rendezvous:
     others_unseen: dict[int, int] = field(default_factory=dict)
     """The same count for each hypothesis still waiting its turn (by index): the drive
     for one hypothesis also tests the others."""
+    waits: bool = False
+    """Waits, the robots exploring on, for a later chance meeting before anyone is
+    driven for it: a hypothesis from sightings, or one the merge did not decide
+    (:attr:`TeamConfig.undecided_wait`)."""
+    hold: tuple[int, int] | None = None
+    """On a drive: the side that explores on before it leaves for the meeting point, and
+    the step it leaves (:attr:`TeamConfig.departure_share`)."""
     formed_at: list[FloatArray] | None = None
     """A hypothesis from sightings (:attr:`TeamConfig.sighting_count`): where the two
     robots were (side 0, side 1; their group roots' frames) when it formed; sightings
@@ -456,6 +482,17 @@ class TeamCoordinator:
         """Per pair of group roots, the hypotheses a rendezvous rejected: the maps' frames
         never move, so they stay wrong and are not tried again."""
         self.hypotheses_tested = 0
+        self._undecided: list[FloatArray] = []
+        """The last merge's hypotheses that are not its own answer (its ``merged``
+        transform): they wait (:attr:`TeamConfig.undecided_wait`)."""
+        self.rendezvous_steps = 0
+        self._meeting_costs: tuple[float, float] | None = None
+        """Each side's way (m) to the last meeting point chosen."""
+        """Robot-steps spent driving to a meeting point or waiting there."""
+        self.first_hypothesis_step: int | None = None
+        """The step the first hypothesis was put to verification (any kind)."""
+        self.first_rendezvous_step: int | None = None
+        """The step robots were first driven to a meeting point."""
         self.views: list[GridMap | None] = [None] * n
         """Per robot in the common frame, the merged map it explores, in robot 0's frame:
         its own map, current, fused with the others' as it last received them. One map
@@ -678,6 +715,9 @@ class TeamCoordinator:
                 self._generate_beside_sightings(maps)
             if self.state is TeamState.HYPOTHESIS_VERIFICATION:
                 self._verify(self._last_observations, self._side_maps(maps), self._link)
+            rendezvous = self.rendezvous
+            if rendezvous is not None and not rendezvous.in_place:
+                self.rendezvous_steps += sum(self._on_goal[r] for r in self.pair)
             if len(self.members) > 1:
                 self._keep_merged_map(maps)
         if len(self.members) > 1 and self.merged_map is not None:
@@ -909,6 +949,7 @@ class TeamCoordinator:
                 )
             )
         pivot = m1.cell_to_world(np.argwhere(~m1.unknown).mean(axis=0)[None, :])[0]
+        decided = result.transform
         fresh = distinct_hypotheses(
             [h.map1_from_map2 for h in result.hypotheses if h.confident],
             self.rejected,
@@ -916,6 +957,14 @@ class TeamCoordinator:
             self.config.merge,
         )
         self.hypotheses = fresh[: self.config.max_rendezvous]
+        # Rivals: one meeting cannot tell which of two open answers is right, more map
+        # may; the merge's own answer (if it gave one) is still driven to at once.
+        rivals = len(fresh) > 1
+        self._undecided = [
+            h
+            for h in self.hypotheses
+            if rivals and (decided is None or not same_answer(h, decided, pivot, self.config.merge))
+        ]
         if not self.hypotheses:
             self._decide("no hypothesis worth a rendezvous; exploring on, retry when maps grow")
             self._rest()
@@ -977,6 +1026,7 @@ class TeamCoordinator:
         x, y, theta = hypothesis
         self.hypotheses_tested += 1
         self.sighting_hypotheses += 1
+        self._note_hypothesis()
         try:
             refined, _, _ = refine_transform(
                 m0, m1, hypothesis, self.config.merge, rng=self._sighting_rng
@@ -1007,6 +1057,7 @@ class TeamCoordinator:
             started=self.step,
             last_match=self.step,
             in_place=True,
+            waits=True,
             formed_at=[pose[:2].copy() for pose in poses],
         )
         self.state = TeamState.HYPOTHESIS_VERIFICATION
@@ -1017,31 +1068,45 @@ class TeamCoordinator:
         return True
 
     def _waiting_on_sightings(self) -> bool:
-        """Whether a hypothesis from sightings waits, unmatched, for a chance meeting
-        (nobody is driven for it yet)."""
+        """Whether a hypothesis (from sightings, or undecided by the merge) waits,
+        unmatched, for a chance meeting (nobody is driven for it yet)."""
         rendezvous = self.rendezvous
         return (
             self.state is TeamState.HYPOTHESIS_VERIFICATION
             and rendezvous is not None
-            and rendezvous.formed_at is not None
+            and rendezvous.waits
             and rendezvous.in_place
             and rendezvous.first_match is None
         )
 
     def _generate_beside_sightings(self, maps: MapSource) -> None:
-        """While a hypothesis from sightings waits for a chance meeting, the pair's maps
-        are still merged as they grow: hypotheses worth a rendezvous from the merge take
-        its place (it is set aside); without any, it waits on."""
+        """While a hypothesis waits for a chance meeting, the pair's maps are still
+        merged as they grow: the new merge's hypotheses take its place (it is set aside),
+        unless the merge gave nothing to drive for, or its first hypothesis waits too and
+        the waiting one is from sightings or is the same answer (within the rendezvous
+        tolerances where robot 1 is): then it waits on, its wait counted from its start."""
         waiting, hypotheses = self.rendezvous, self.hypotheses
         assert waiting is not None
         if not self._link or not self._generate(self._side_maps(maps)):
             return
-        if self.rendezvous is None:  # the merge gave nothing to drive for
+        kind = "from sightings" if waiting.formed_at is not None else f"#{waiting.index}"
+        new = self.rendezvous
+        keep = new is None or (
+            new.waits
+            and new.first_match is None
+            and (
+                waiting.formed_at is not None
+                or self._within_verified(
+                    new.hypothesis, waiting.hypothesis, self._last_poses[1][:2]
+                )
+            )
+        )
+        if keep:
             self.rendezvous, self.hypotheses = waiting, hypotheses
             self.state = TeamState.HYPOTHESIS_VERIFICATION
-            self._decide("the hypothesis from sightings waits on for a later meeting")
+            self._decide(f"the hypothesis {kind} waits on for a later meeting")
         else:
-            self._decide("the hypothesis from sightings is set aside for the merge's")
+            self._decide(f"the hypothesis {kind} is set aside for the merge's")
 
     def _map_check(self, m0: GridMap, m1: GridMap, transform: FloatArray) -> str | None:
         """Why the maps conflict at ``transform`` (the merge's conflict check, at its
@@ -1079,6 +1144,7 @@ class TeamCoordinator:
             verdict = self._verify_in_place(hypothesis, maps(0))
             if verdict is not None:
                 self.hypotheses_tested += 1
+                self._note_hypothesis()
                 rendezvous = _Rendezvous(
                     hypothesis=hypothesis,
                     index=index,
@@ -1104,6 +1170,27 @@ class TeamCoordinator:
                 self.rejected.append(hypothesis)
                 index += 1
                 continue
+            if self.config.undecided_wait != 0 and not self._is_decided(hypothesis):
+                self.hypotheses_tested += 1
+                self._note_hypothesis()
+                self.rendezvous = _Rendezvous(
+                    hypothesis=hypothesis,
+                    index=index,
+                    meeting_point=self._last_poses[0][:2].copy(),
+                    started=self.step,
+                    last_match=self.step,
+                    in_place=True,
+                    waits=True,
+                )
+                self.state = TeamState.HYPOTHESIS_VERIFICATION
+                wait = self.config.undecided_wait
+                until = "they have nothing left to explore" if wait is None else f"{wait} steps"
+                self._decide(
+                    f"hypothesis #{index}: a rival is open beside it (the merge's answer is "
+                    f"not this one); tested where the robots explore, until {until}, "
+                    "before a rendezvous"
+                )
+                return
             meeting = self._meeting_point(hypothesis, maps)
             if meeting is not None and meeting[1] > self.config.max_meeting_cost:
                 self._decide(
@@ -1118,9 +1205,10 @@ class TeamCoordinator:
                     meeting_point=point0,
                     started=self.step,
                 )
-                self._send_to_meet(hypothesis, point0)
+                self._send_to_meet(self.rendezvous)
                 self.state = TeamState.HYPOTHESIS_VERIFICATION
                 self.hypotheses_tested += 1
+                self._note_hypothesis()
                 x, y, theta = hypothesis
                 self._decide(
                     f"rendezvous for hypothesis #{index} (x {x:.2f}, y {y:.2f}, "
@@ -1132,6 +1220,16 @@ class TeamCoordinator:
                 self._decide(f"hypothesis #{index}: no meeting point reachable by both; skipped")
             index += 1
         self._give_up()
+
+    def _is_decided(self, hypothesis: FloatArray) -> bool:
+        """Whether ``hypothesis`` is not one the last merge left undecided (its verdict
+        ``merged`` gave another answer or none: a confident rival, too small an overlap),
+        i.e. the merge's own answer."""
+        return not any(hypothesis is undecided for undecided in self._undecided)
+
+    def _note_hypothesis(self) -> None:
+        if self.first_hypothesis_step is None:
+            self.first_hypothesis_step = self.step
 
     def _verify_in_place(self, hypothesis: FloatArray, map0: GridMap) -> bool | None:
         """A rendezvous of length zero: if the hypothesis puts side 1's robot well within
@@ -1184,7 +1282,11 @@ class TeamCoordinator:
             for point in avoid:
                 near |= np.hypot(*(centres - point).T) < radius
             costs[0] = np.where(near.reshape(rows, cols), np.inf, costs[0])
-        return choose_meeting_point(costs[0], costs[1], m0)
+        chosen = choose_meeting_point(costs[0], costs[1], m0)
+        if chosen is not None:
+            cell = tuple(m0.world_to_cell(chosen[0][None, :])[0])
+            self._meeting_costs = (float(costs[0][cell]), float(costs[1][cell]))
+        return chosen
 
     def _driven_map(self, side: int, maps: MapSource) -> tuple[GridMap, FloatArray, FloatArray]:
         """The map the pair's side-``side`` robot drives on to a given goal, its place in
@@ -1207,6 +1309,10 @@ class TeamCoordinator:
         assert rendezvous is not None
         config = self.config.rendezvous
         robots = self.pair
+        hold = rendezvous.hold
+        if hold is not None and self.step >= hold[1] and not rendezvous.in_place:
+            rendezvous.hold = None
+            self._send(hold[0], self._meeting_goal(rendezvous, hold[0]))
         poses = [np.asarray(o["pose"], dtype=np.float64) for o in observations]
         if link and self._moved_off(rendezvous, poses):
             if rendezvous.previous is not None:
@@ -1267,9 +1373,18 @@ class TeamCoordinator:
                 else:
                     rendezvous.unseen = 0
                 self._test_waiting(rendezvous, poses, maps)
-        sighted = rendezvous.formed_at is not None and rendezvous.first_match is None
-        # A hypothesis from sightings waits longer for a later meeting by chance.
-        lost_after = self.config.sighting_wait if sighted else UNSEEN_STEPS
+        sighted = rendezvous.waits and rendezvous.first_match is None
+        # A waiting hypothesis (from sightings, or undecided by the merge) waits longer
+        # for a later meeting by chance.
+        wait = (
+            self.config.sighting_wait
+            if rendezvous.formed_at is not None
+            else self.config.undecided_wait
+        )
+        if not sighted:
+            lost_after: float = UNSEEN_STEPS
+        else:
+            lost_after = math.inf if wait is None else wait
         # Robots with nothing left to explore would wait for a chance meeting in vain.
         idle = sighted and all(self.done(r) for r in robots)
         if (
@@ -1312,12 +1427,31 @@ class TeamCoordinator:
         elif self.step - rendezvous.started >= config.timeout_steps:
             self._reject(rendezvous, maps, "rendezvous timed out")
 
-    def _send_to_meet(self, hypothesis: FloatArray, point0: FloatArray) -> None:
-        """Both sides of the pair to the meeting point ``point0`` (side 0's frame), side 1
-        to where ``hypothesis`` puts it in its own frame."""
-        point1 = transform_points(inverse(hypothesis), point0[None, :])[0]
-        for side, goal in enumerate((point0, point1)):
-            self._send(side, goal)
+    def _send_to_meet(self, rendezvous: _Rendezvous) -> None:
+        """Both sides of the pair to the meeting point (side 0's frame; side 1 to where
+        the hypothesis puts it in its own frame); the side with the shorter way only
+        after it explored on for :attr:`TeamConfig.departure_share` of the difference."""
+        if self.first_rendezvous_step is None:
+            self.first_rendezvous_step = self.step
+        rendezvous.hold = None
+        costs, share = self._meeting_costs, self.config.departure_share
+        self._meeting_costs = None  # used once: for the point just chosen
+        if costs is not None and share > 0:
+            follower = self.config.explorer.follower
+            early = int(np.argmin(costs))
+            steps = int(share * abs(costs[0] - costs[1]) / (follower.cruise_speed * follower.dt))
+            if steps > 0:
+                rendezvous.hold = (early, self.step + steps)
+        for side in (0, 1):
+            if rendezvous.hold is None or rendezvous.hold[0] != side:
+                self._send(side, self._meeting_goal(rendezvous, side))
+
+    def _meeting_goal(self, rendezvous: _Rendezvous, side: int) -> FloatArray:
+        """The meeting point in side ``side``'s group frame."""
+        point0 = rendezvous.meeting_point
+        if side == 0:
+            return point0
+        return transform_points(inverse(rendezvous.hypothesis), point0[None, :])[0]
 
     def _drive_to_meet(self, rendezvous: _Rendezvous, maps: MapSource) -> bool:
         """A hypothesis matched where the robots stood, then they lost sight of each
@@ -1336,10 +1470,10 @@ class TeamCoordinator:
         if meeting is None or meeting[1] > self.config.max_meeting_cost:
             return False
         point0, cost = meeting
-        self._send_to_meet(hypothesis, point0)
         rendezvous.in_place = False
         rendezvous.meeting_point = point0
         rendezvous.started = self.step
+        self._send_to_meet(rendezvous)
         if rendezvous.first_match is not None:
             rendezvous.first_match = self.step  # a full window to confirm at the meeting
         self._decide(

@@ -459,6 +459,9 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                 "step_verified": team.step_verified,
                 "seeking_steps": sum(team.seeking_steps),
                 "sighting_hypotheses": team.sighting_hypotheses,
+                "first_hypothesis_step": team.first_hypothesis_step,
+                "first_rendezvous_step": team.first_rendezvous_step,
+                "rendezvous_steps": team.rendezvous_steps,
             }
             if len(agents) > 2:
                 merge_report["joined"] = len(joined)

@@ -610,3 +610,93 @@ def test_the_merge_goes_on_while_a_hypothesis_from_sightings_waits() -> None:
     team._generate_beside_sightings(maps)
     assert team.rendezvous is not None and team.rendezvous.formed_at is None
     assert any("set aside for the merge's" in d.text for d in team.pop_decisions())
+
+
+def _undecided_team(
+    hypothesis: np.ndarray, wait: int, share: float = 0.0
+) -> tuple[MultiRobotSlamEnv, TeamCoordinator, MapCache, dict[str, Any]]:
+    """The office corridor (``STARTS``, 5 m apart: beyond the in-place check) and a team
+    whose last merge left ``hypothesis`` undecided (a rival's, or too small an overlap)."""
+    env = MultiRobotSlamEnv(scenario="office", seed=0, config=EnvConfig(starts=STARTS))
+    observations, _ = env.reset()
+    maps = MapCache(env)
+    config = TeamConfig(undecided_wait=wait, departure_share=share)
+    team = TeamCoordinator(config, rng=np.random.default_rng(0))
+    team._retry_area = {(0, 1): np.inf}  # no new merge attempt during the test
+    team.act([observations[a] for a in env.possible_agents], maps)
+    team.hypotheses = [hypothesis]
+    team._undecided = [hypothesis]
+    team._start_rendezvous(0, maps)
+    return env, team, maps, observations
+
+
+def test_a_hypothesis_the_merge_left_undecided_is_tested_while_the_robots_explore() -> None:
+    # It puts robot 1 6 m behind where it is: the robots, exploring, see each other
+    # elsewhere, which rejects it without anybody driven to a meeting point.
+    wrong = compose(TRUE_TRANSFORM, [-6.0, 0.0, 0.0])
+    env, team, maps, observations = _undecided_team(wrong, wait=300)
+    rendezvous = team.rendezvous
+    assert rendezvous is not None and rendezvous.waits and rendezvous.in_place
+    assert team.state is TeamState.HYPOTHESIS_VERIFICATION and not any(team._on_goal)
+    assert team.first_hypothesis_step == 1 and team.first_rendezvous_step is None
+    decisions, _, _ = _run_team(env, team, maps, observations, 200)
+    assert any("rejected: robot_" in d and "from the prediction" in d for d in decisions), decisions
+    assert team.rendezvous_steps == 0 and team.first_rendezvous_step is None
+    assert team.rejected and team.rejected[0] is wrong
+
+
+def test_a_hypothesis_the_merge_left_undecided_is_met_for_after_its_wait() -> None:
+    wrong = compose(TRUE_TRANSFORM, [-6.0, 0.0, 0.0])
+    env, team, maps, observations = _undecided_team(wrong, wait=30)
+    team._meeting_point = lambda hypothesis, maps, avoid=None: (np.array([2.5, 0.1]), 3.0)  # type: ignore[method-assign]
+
+    def blind(step: int, given: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        return [{**o, "peer": np.zeros_like(o["peer"])} for o in given]
+
+    decisions, _, _ = _run_team(env, team, maps, observations, 29, seen=blind)
+    assert not any(team._on_goal) and team.rendezvous is not None, decisions
+    decisions, _, _ = _run_team(env, team, maps, observations, 1, seen=blind)
+    assert any("no sighting for 30 steps" in d and "drive to meet" in d for d in decisions)
+    assert all(team._on_goal) and team.first_rendezvous_step is not None, decisions
+    assert team.rendezvous is not None and not team.rendezvous.in_place
+
+
+def test_the_merges_own_answer_is_driven_to_at_once() -> None:
+    wrong = compose(TRUE_TRANSFORM, [-6.0, 0.0, 0.0])
+    _, team, maps, _ = _undecided_team(wrong, wait=300)
+    team._rest()
+    team._undecided = []  # the same hypothesis, now the merge's own answer
+    team.hypotheses = [wrong]
+    team._meeting_point = lambda hypothesis, maps, avoid=None: (np.array([2.5, 0.1]), 3.0)  # type: ignore[method-assign]
+    team._start_rendezvous(0, maps)
+    assert team.rendezvous is not None and not team.rendezvous.in_place
+    assert all(team._on_goal)
+
+
+def test_the_robot_nearer_the_meeting_point_explores_on_before_it_leaves() -> None:
+    env, team, maps, observations = _undecided_team(TRUE_TRANSFORM, wait=300, share=0.5)
+    team._rest()
+    team._undecided = []
+    team.hypotheses = [TRUE_TRANSFORM]
+
+    def meeting(hypothesis: Any, maps: Any, avoid: Any = None) -> tuple[np.ndarray, float]:
+        team._meeting_costs = (2.0, 4.0)  # robot 0's way is 2 m shorter
+        return np.array([3.0, 0.2]), 4.0  # (7.0, 8.2) in the world
+
+    team._meeting_point = meeting  # type: ignore[method-assign]
+    team._start_rendezvous(0, maps)
+    # Half of 2 m at the cruise speed (0.8 m/s, 0.1 s a step): 12 steps.
+    assert team.rendezvous is not None and team.rendezvous.hold == (0, team.step + 12)
+    assert team._on_goal == [False, True]
+
+    def blind(step: int, given: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        return [{**o, "peer": np.zeros_like(o["peer"])} for o in given]
+
+    decisions, _, _ = _run_team(env, team, maps, observations, 11, seen=blind)
+    assert team._on_goal == [False, True] and team.rendezvous_steps == 11, decisions
+    _run_team(env, team, maps, observations, 1, seen=blind)
+    assert team._on_goal == [True, True] and team.rendezvous.hold is None
+    with pytest.raises(ValueError, match="departure_share"):
+        TeamConfig(departure_share=-0.5)
+    with pytest.raises(ValueError, match="undecided_wait"):
+        TeamConfig(undecided_wait=-1)

@@ -68,3 +68,9 @@ def test_summary_counts_wrong_merges_and_speed_up() -> None:
     total = _summarise(None, runs)
     assert total["scenario"] == "all" and total["runs"] == 3 and total["faster"] == 1
     assert total["t90_coordinated"] == 50.0 and total["t90_independent"] == 60.0
+    # Robot-steps on rendezvous drives: summed where reported, "-" where no run did.
+    assert row["rendezvous_steps"] is None
+    runs[0]["rendezvous_steps"], runs[1]["rendezvous_steps"] = 40, 0
+    row = _summarise("s", runs)
+    assert row["rendezvous_steps"] == 40
+    assert "| 0 | 40 | 0 |" in format_explore_table([row]).splitlines()[2]

@@ -36,6 +36,8 @@ Reported per scenario:
                            covered 90 % (or verified it in a run that never did)
 ``seeking_steps``          robot-steps the team runs spent seeking contact (driving
                            back to the place of the last link and waiting there)
+``rendezvous_steps``       robot-steps the team runs spent driving to a meeting point
+                           or waiting there (None when no report gives it)
 ``steps_after_coverage``   steps the team runs went on after reaching their target
                            coverage without a verified merge, until merged or with
                            nothing left to explore (``until_merged``)
@@ -200,6 +202,7 @@ def run_row(report: dict[str, Any]) -> dict[str, Any]:
         "step_verified": merge["step_verified"],
         "verified_before_t90": _verified_before_t90(report),
         "seeking_steps": merge.get("seeking_steps", 0),
+        "rendezvous_steps": merge.get("rendezvous_steps"),
         "steps_after_coverage": report.get("steps_after_coverage", 0),
         "coverage": report["coverage"]["merged"],
         "steps": report["steps"],
@@ -422,6 +425,11 @@ def _summarise(
         "hypotheses_tested": sum(r["hypotheses_tested"] for r in team),
         "verified_before_t90": sum(r.get("verified_before_t90", False) for r in team),
         "seeking_steps": sum(r.get("seeking_steps", 0) for r in team),
+        "rendezvous_steps": (
+            None
+            if all(r.get("rendezvous_steps") is None for r in team)
+            else sum(r.get("rendezvous_steps") or 0 for r in team)
+        ),
         "steps_after_coverage": sum(r.get("steps_after_coverage", 0) for r in team),
         "collisions": collisions,
     }
@@ -449,14 +457,17 @@ def format_explore_table(rows: Sequence[dict[str, Any]]) -> str:
         "speed-up indep/team | share of oracle gain | faster | verified | wrong accepted | "
         "error m med / p90 / max | error ° med / p90 / max | "
         "collision steps team med / max (% steps) | hypotheses tested | "
-        "verified before t90 | contact seeking (robot-steps) | steps after coverage |",
+        "verified before t90 | contact seeking (robot-steps) | rendezvous (robot-steps) | "
+        "steps after coverage |",
         "| --- | "
         + ("--- | " if by_policy else "")
         + ("---: | ---: | " if by_size else "")
         + "---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
-        "| ---: | ---: | ---: | ---: | ---: |",
+        "| ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for row in rows:
+        rendezvous = row.get("rendezvous_steps")
+        rendezvous_text = "-" if rendezvous is None else str(rendezvous)
         translation, rotation = row["translation_error"], row["rotation_error"]
         t_error = "-" if translation is None else " / ".join(f"{v:.3f}" for v in translation)
         r_error = "-" if rotation is None else " / ".join(f"{v:.2f}" for v in rotation)
@@ -480,6 +491,7 @@ def format_explore_table(rows: Sequence[dict[str, Any]]) -> str:
             f"{row['faster']}/{row['runs']} | {row['verified']}/{row['runs']} | "
             f"{row['wrong_accepted']} | {t_error} | {r_error} | {collisions} | "
             f"{row['hypotheses_tested']} | {row.get('verified_before_t90', 0)}/{row['runs']} | "
-            f"{row.get('seeking_steps', 0)} | {row.get('steps_after_coverage', 0)} |"
+            f"{row.get('seeking_steps', 0)} | {rendezvous_text} | "
+            f"{row.get('steps_after_coverage', 0)} |"
         )
     return "\n".join(lines)
