@@ -314,7 +314,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
     # The true map0_from_map_i: what the team's transforms are judged against.
     true_transforms = [compose(inverse(world_from_maps[0]), w) for w in world_from_maps]
     true_transform = true_transforms[1]
-    evaluator = CoverageEvaluator(world, env.simulator.starts)
+    evaluator = CoverageEvaluator(world, env.simulator.starts, radius=env.config.robot.radius)
     if config.oracle:
         team.start_coordinated(np.array(true_transforms[1:]), maps)
     # The robots whose maps count towards coverage (single: robot 0 alone).
