@@ -520,12 +520,18 @@ def _thick(grid: GridMap) -> GridMap:
     return GridMap(cells=cells, resolution=grid.resolution, origin=grid.origin)
 
 
+def _turn_about_centre(grid: GridMap) -> np.ndarray:
+    """The transform that turns ``grid``'s raster by 180 degrees about its centre."""
+    rows, cols = grid.cells.shape
+    return np.array([cols * grid.resolution, rows * grid.resolution, math.pi])
+
+
 def _turned_rival(m1: GridMap, m2: GridMap, truth: np.ndarray) -> tuple[bool, float, float]:
     """The truth and the room turned by 180 degrees about its centre (its walls land on
     walls, but for the inner stub), judged as :func:`settled` judges them, with equal
     scores: whether the turned one is settled, and both shares of walls missed."""
     rows, cols = m1.cells.shape
-    turned = np.array([cols * m1.resolution, rows * m1.resolution, math.pi])
+    turned = _turn_about_centre(m1)
     best = replace(_candidate(0.0, score=100.0), fine_walls=wall_match(m1, m2, truth))
     rival = replace(_candidate(6.0, score=100.0), fine_walls=wall_match(m1, m2, turned))
     rival = replace(rival, map1_from_map2=turned)
@@ -566,8 +572,7 @@ def test_the_pipeline_rejudges_the_best_and_its_rivals_when_settle_is_on() -> No
     # turned room leaves the stub unmatched, and the truth is accepted.
     m1 = room_map()
     m2 = _thick(m1)
-    rows, cols = m1.cells.shape
-    turned = np.array([cols * m1.resolution, rows * m1.resolution, math.pi])
+    turned = _turn_about_centre(m1)
     candidates = replace(
         _candidates(
             replace(_candidate(0.0, score=100.0), map1_from_map2=np.zeros(3)),
@@ -646,8 +651,7 @@ def test_the_pipeline_switches_to_a_rival_that_lays_the_walls_on_each_other() ->
     # inf) the answer stays ambiguous.
     m1 = room_map()
     m2 = _thick(m1)
-    rows, cols = m1.cells.shape
-    turned = np.array([cols * m1.resolution, rows * m1.resolution, math.pi])
+    turned = _turn_about_centre(m1)
     candidates = replace(
         _candidates(
             replace(_candidate(0.0, score=100.0), map1_from_map2=turned),
