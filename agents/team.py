@@ -238,9 +238,8 @@ class TeamConfig:
         factor = self.regrow_factor
         ok = isinstance(factor, int | float) and math.isfinite(factor) and factor >= 1
         require(name, "regrow_factor", factor, ok, "a finite number >= 1")
-        wait = self.undecided_wait
-        ok = wait is None or (isinstance(wait, int) and not isinstance(wait, bool) and wait >= 0)
-        require(name, "undecided_wait", wait, ok, "None or a whole number >= 0")
+        if self.undecided_wait is not None:
+            check_fields(self, whole=("undecided_wait",))
         margin, peer_range = self.sight_margin, self.peer_range
         require(name, "sight_margin", margin, margin < peer_range, f"< peer_range ({peer_range})")
 
@@ -483,12 +482,12 @@ class TeamCoordinator:
         never move, so they stay wrong and are not tried again."""
         self.hypotheses_tested = 0
         self._undecided: list[FloatArray] = []
-        """The last merge's hypotheses that are not its own answer (its ``merged``
-        transform): they wait (:attr:`TeamConfig.undecided_wait`)."""
+        """The last merge's hypotheses that wait (:attr:`TeamConfig.undecided_wait`): its
+        confident answers other than its own ``merged`` one, when it left a rival open."""
         self.rendezvous_steps = 0
+        """Robot-steps spent driving to a meeting point or waiting there."""
         self._meeting_costs: tuple[float, float] | None = None
         """Each side's way (m) to the last meeting point chosen."""
-        """Robot-steps spent driving to a meeting point or waiting there."""
         self.first_hypothesis_step: int | None = None
         """The step the first hypothesis was put to verification (any kind)."""
         self.first_rendezvous_step: int | None = None
@@ -1086,6 +1085,7 @@ class TeamCoordinator:
         the waiting one is from sightings or is the same answer (within the rendezvous
         tolerances where robot 1 is): then it waits on, its wait counted from its start."""
         waiting, hypotheses = self.rendezvous, self.hypotheses
+        undecided, tested = self._undecided, self.hypotheses_tested
         assert waiting is not None
         if not self._link or not self._generate(self._side_maps(maps)):
             return
@@ -1102,7 +1102,9 @@ class TeamCoordinator:
             )
         )
         if keep:
+            # The new merge's hypotheses are dropped: its rivals and its count with them.
             self.rendezvous, self.hypotheses = waiting, hypotheses
+            self._undecided, self.hypotheses_tested = undecided, tested
             self.state = TeamState.HYPOTHESIS_VERIFICATION
             self._decide(f"the hypothesis {kind} waits on for a later meeting")
         else:
@@ -1222,9 +1224,8 @@ class TeamCoordinator:
         self._give_up()
 
     def _is_decided(self, hypothesis: FloatArray) -> bool:
-        """Whether ``hypothesis`` is not one the last merge left undecided (its verdict
-        ``merged`` gave another answer or none: a confident rival, too small an overlap),
-        i.e. the merge's own answer."""
+        """Whether ``hypothesis`` is not one the last merge left waiting (a confident
+        answer other than its own ``merged`` one, beside an open rival)."""
         return not any(hypothesis is undecided for undecided in self._undecided)
 
     def _note_hypothesis(self) -> None:

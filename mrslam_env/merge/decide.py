@@ -352,14 +352,15 @@ def switching_rival(
     if best.fine_walls is None:
         return None
     chosen: ScoredHypothesis | None = None
+    chosen_missed = float("inf")
     for rival in ambiguous_rivals(scored, pivot, config):
         walls = rival.fine_walls
         if walls is None or not same_part(best, rival, pivot, config):
             continue
         if best.fine_walls.missed < config.switch_ratio * walls.missed:
             continue
-        if chosen is None or chosen.fine_walls is None or walls.missed < chosen.fine_walls.missed:
-            chosen = rival
+        if walls.missed < chosen_missed:
+            chosen, chosen_missed = rival, walls.missed
     return chosen
 
 
