@@ -661,6 +661,30 @@ def test_a_hypothesis_the_merge_left_undecided_is_met_for_after_its_wait() -> No
     assert team.rendezvous is not None and not team.rendezvous.in_place
 
 
+def test_a_waiting_hypothesis_kept_beside_a_regrown_merge_keeps_its_rivals() -> None:
+    # Regression: the regrown merge gives the waiting answer again (it waits too), so
+    # the waiting hypothesis is kept; its rival must still wait (not be driven to at
+    # once when the first is rejected) and the dropped duplicate is not counted.
+    wrong = compose(TRUE_TRANSFORM, [-6.0, 0.0, 0.0])
+    rival = compose(TRUE_TRANSFORM, [6.0, 0.0, 0.0])
+    _, team, maps, _ = _undecided_team(wrong, wait=300)
+    team.hypotheses, team._undecided = [wrong, rival], [wrong, rival]
+    tested = team.hypotheses_tested
+    regrown = wrong.copy()
+
+    def again(sides: Any) -> bool:
+        team.hypotheses, team._undecided = [regrown], [regrown]
+        team._start_rendezvous(0, sides)
+        return True
+
+    team._generate = again  # type: ignore[method-assign]
+    team._link = True
+    team._generate_beside_sightings(maps)
+    assert team.rendezvous is not None and team.rendezvous.hypothesis is wrong
+    assert not team._is_decided(rival)
+    assert team.hypotheses_tested == tested
+
+
 def test_the_merges_own_answer_is_driven_to_at_once() -> None:
     wrong = compose(TRUE_TRANSFORM, [-6.0, 0.0, 0.0])
     _, team, maps, _ = _undecided_team(wrong, wait=300)
