@@ -1374,20 +1374,17 @@ class TeamCoordinator:
                 else:
                     rendezvous.unseen = 0
                 self._test_waiting(rendezvous, poses, maps)
-        sighted = rendezvous.waits and rendezvous.first_match is None
-        # A waiting hypothesis (from sightings, or undecided by the merge) waits longer
-        # for a later meeting by chance.
-        wait = (
-            self.config.sighting_wait
-            if rendezvous.formed_at is not None
-            else self.config.undecided_wait
-        )
-        if not sighted:
-            lost_after: float = UNSEEN_STEPS
-        else:
+        # A waiting hypothesis (from sightings, or a rival the merge left open), still
+        # unmatched, waits longer for a later meeting by chance.
+        waiting = rendezvous.waits and rendezvous.first_match is None
+        lost_after: float = UNSEEN_STEPS
+        if waiting and rendezvous.formed_at is not None:
+            lost_after = self.config.sighting_wait
+        elif waiting:
+            wait = self.config.undecided_wait
             lost_after = math.inf if wait is None else wait
         # Robots with nothing left to explore would wait for a chance meeting in vain.
-        idle = sighted and all(self.done(r) for r in robots)
+        idle = waiting and all(self.done(r) for r in robots)
         if (
             rendezvous.in_place
             and rendezvous.last_match is not None
@@ -1406,7 +1403,7 @@ class TeamCoordinator:
             return
         if rendezvous.in_place:
             if self.step - rendezvous.started >= config.wait_steps + (lost_after - UNSEEN_STEPS):
-                why = "no meeting point" if sighted else "lost sight of each other"
+                why = "no meeting point" if waiting else "lost sight of each other"
                 self._set_aside(rendezvous, maps, why)
             return
         stuck = [r for r in robots if self.explorers[r].status == "goal_unreachable"]
