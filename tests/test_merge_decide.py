@@ -28,6 +28,7 @@ from mrslam_env.merge.decide import (
     CANDIDATE_CHECKS,
     RULES,
     Candidates,
+    ambiguous_rival,
     check_conflict_fraction,
     check_overlap_area,
     contradicted,
@@ -290,6 +291,24 @@ def test_rule_unambiguous_refuses_a_clean_rival_from_a_quarter_of_the_best(
         assert _refused_by(candidates) == ("rule_unambiguous", f"no confident merge: {why}")
     else:
         assert why is None
+
+
+@pytest.mark.parametrize(("covered", "refused"), [(0.2, True), (0.19, False), (0.08, False)])
+def test_a_rival_covering_too_little_to_be_an_answer_is_no_rival(
+    covered: float, refused: bool
+) -> None:
+    # A corridor end fitted elsewhere: confident, scoring 30 % of the best, but covering
+    # less of the smaller map than rule_covers_enough asks of an answer. It would be
+    # refused as the best, so it does not make the best ambiguous either (it did before:
+    # any confident rival from a quarter of the best score counted).
+    assert CONFIG.min_overlap_fraction == 0.2
+    small = _agreement(agree=300, disagree=5, overlap_fraction=covered)
+    rival = _candidate(6.0, score=30.0, agreement=small)
+    candidates = _candidates(_candidate(0.0, score=100.0), rival)
+    assert (ambiguous_rival(candidates.hypotheses, PIVOT, CONFIG) is rival) is refused
+    decision = decide(candidates, CONFIG)
+    assert (decision.rule == "rule_unambiguous") is refused
+    assert (decision.chosen is candidates.hypotheses[0]) is not refused
 
 
 def test_a_rotated_rival_in_the_same_place_is_a_different_answer() -> None:

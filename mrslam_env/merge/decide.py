@@ -273,14 +273,24 @@ def ambiguous_rivals(
     scored: list[ScoredHypothesis], pivot: FloatArray, config: MergeConfig
 ) -> list[ScoredHypothesis]:
     """Every confident candidate that is a *different* answer from the best one
-    (``scored[0]``, sorted best first) and scores enough to make the answer ambiguous:
-    ``ambiguity_ratio`` of the best score, or ``contradicted_rival_ratio`` of it for a
-    :func:`contradicted` rival. Whether each is :func:`settled` is not asked."""
+    (``scored[0]``, sorted best first), covers enough to be an answer itself (at least
+    ``min_overlap_fraction`` of the smaller map, as :func:`rule_covers_enough` asks of
+    the best) and scores enough to make the answer ambiguous: ``ambiguity_ratio`` of the
+    best score, or ``contradicted_rival_ratio`` of it for a :func:`contradicted` rival.
+    Whether each is :func:`settled` is not asked.
+
+    A rival is a second answer the maps allow; a placement that the rules would refuse
+    as the best, because it covers too little of either map to say anything (a corridor
+    end or a room corner fitted elsewhere), is no such answer, so it does not make the
+    best ambiguous either. Reads no threshold of its own (docs/decisions.md, "A rival must
+    cover enough to be an answer")."""
     best = scored[0]
     rivals = []
     for other in scored[1:]:
-        if not other.confident or same_answer(
-            best.map1_from_map2, other.map1_from_map2, pivot, config
+        if (
+            not other.confident
+            or other.agreement.overlap_fraction < config.min_overlap_fraction
+            or same_answer(best.map1_from_map2, other.map1_from_map2, pivot, config)
         ):
             continue
         ratio = (
@@ -419,10 +429,11 @@ def unsettled_rival(
 
 def rule_unambiguous(candidates: Candidates, config: MergeConfig) -> str | None:
     """No confident candidate that is a *different* transform (:func:`same_answer`:
-    ``distinct_translation`` m at the pivot, ``distinct_rotation`` rad) scores
-    ``ambiguity_ratio`` of the best score or more, or ``contradicted_rival_ratio`` of it
-    for a :func:`contradicted` rival (:func:`ambiguous_rival`), unless re-judging at the
-    input resolution :func:`settled` it (the rival misses ``settle_ratio`` times the best's
+    ``distinct_translation`` m at the pivot, ``distinct_rotation`` rad) and covers
+    ``min_overlap_fraction`` of the smaller map scores ``ambiguity_ratio`` of the best
+    score or more, or ``contradicted_rival_ratio`` of it for a :func:`contradicted` rival
+    (:func:`ambiguous_rivals`, :func:`ambiguous_rival`), unless re-judging at the input
+    resolution :func:`settled` it (the rival misses ``settle_ratio`` times the best's
     share of walls there).
 
     In repetitive buildings (shelf aisles, mirrored wings) the wrong placement often

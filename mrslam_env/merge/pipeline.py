@@ -194,7 +194,9 @@ class MergeConfig:
     smaller map's known cells (:attr:`Agreement.overlap_fraction`), whichever source
     proposed it (:func:`~mrslam_env.merge.decide.rule_covers_enough`): a chance fit of a
     small piece of a repetitive building (a maze corridor, the next shelf aisle) agrees
-    almost everywhere on the little it covers."""
+    almost everywhere on the little it covers. For the same reason a candidate covering
+    less is no rival that makes the best ambiguous
+    (:func:`~mrslam_env.merge.decide.ambiguous_rivals`)."""
     max_conflict_fraction: float = 0.01
     """A confident candidate has at most this fraction of conflicts (a wall of one map on
     open floor of the other, beyond a two-cell tolerance, so that thick or doubled walls
