@@ -186,3 +186,20 @@ def test_cli_rejects_bad_cut_arguments_in_one_line(capsys) -> None:
     assert exit_info.value.code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "invalid choice: 'slices'" in err and "cuts" in err
+
+
+def test_windows_of_a_large_map_are_large() -> None:
+    from scenarios.bench.merge.cuts import _Source
+
+    source = _Source("bookstore")  # known box 297 x 311 cells
+    rng = np.random.default_rng(0)
+    rows, cols = source.box[1] - source.box[0], source.box[3] - source.box[2]
+    config = CutConfig(large_side=300)  # longer than the rows, shorter than the columns
+    sides = np.array(
+        [(w[1] - w[0], w[3] - w[2]) for w in (source.window(rng, config) for _ in range(200))]
+    )
+    assert sides[:, 1].min() >= 300 and sides[:, 1].max() <= cols
+    assert sides[:, 0].min() < 0.6 * rows  # the fraction rule on the shorter side
+    capped = CutConfig(large_side=300, max_side=305)
+    for window in (source.window(rng, capped) for _ in range(20)):
+        assert 300 <= window[3] - window[2] <= 305

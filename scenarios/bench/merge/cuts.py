@@ -15,7 +15,8 @@ re-rasterised into the turned frame ``F2`` (:func:`turned_grid`: nearest cell, U
 outside, the centres of the window's occupied cells marked occupied where they land, and
 the midpoints of 8-adjacent ones that would fall apart, so that no thin wall breaks). So
 the truth is exact: ``map1_from_map2 = file_from_F2``. Window sides are uniform fractions
-(:attr:`CutConfig.side_fraction`) of the known box's sides, at most
+(:attr:`CutConfig.side_fraction`) of the known box's sides, at least
+:attr:`CutConfig.large_side` (800) cells along a side longer than that and at most
 :attr:`CutConfig.max_side` cells.
 
 The overlap is computed on the map file's lattice before the turn, where it is exact:
@@ -114,6 +115,9 @@ class CutConfig:
     """A window side is a uniform fraction in this range of the known box's side."""
     max_side: int = 1250
     """Longest window side, cells."""
+    large_side: int = 800
+    """Along a known box side longer than this, window sides are at least this long, cells
+    (the sizes the issue's speed target names, where a map is that large)."""
     max_turn_deg: float = 180.0
     """Map 2 is turned by a uniform angle in [-this, this), degrees (180: any angle)."""
     min_known_area: float = 4.0
@@ -123,7 +127,7 @@ class CutConfig:
 
     def __post_init__(self) -> None:
         name = type(self).__name__
-        check_fields(self, counts=("n_pairs", "max_side", "tries"))
+        check_fields(self, counts=("n_pairs", "max_side", "large_side", "tries"))
         check_fields(self, non_negative=("min_known_area",))
         turn = self.max_turn_deg
         require(name, "max_turn_deg", turn, 0.0 <= turn <= 180.0, "in [0, 180]")
@@ -238,12 +242,16 @@ class _Source:
         self, rng: np.random.Generator, config: CutConfig, span: Window | None = None
     ) -> Window:
         """A random window inside ``span`` (default: the known box), sides drawn as
-        :attr:`CutConfig.side_fraction` of ``span``'s."""
+        :attr:`CutConfig.side_fraction` of ``span``'s, at least
+        :attr:`CutConfig.large_side` along a side longer than that."""
         r0, r1, c0, c1 = span if span is not None else self.box
         low, high = config.side_fraction
         sides = []
         for length in (r1 - r0, c1 - c0):
-            side = round(length * rng.uniform(low, high))
+            shortest = low * length
+            if length > config.large_side:
+                shortest = max(shortest, config.large_side)
+            side = round(rng.uniform(shortest, max(shortest, high * length)))
             sides.append(int(min(max(side, 1), config.max_side, length)))
         top = r0 + int(rng.integers(0, r1 - r0 - sides[0] + 1))
         left = c0 + int(rng.integers(0, c1 - c0 - sides[1] + 1))
