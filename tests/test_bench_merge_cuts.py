@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -203,3 +204,24 @@ def test_windows_of_a_large_map_are_large() -> None:
     capped = CutConfig(large_side=300, max_side=305)
     for window in (source.window(rng, capped) for _ in range(20)):
         assert 300 <= window[3] - window[2] <= 305
+
+
+def test_cli_runs_the_methods_on_the_cut_set(tmp_path, monkeypatch, capsys) -> None:
+    from scenarios.bench.merge import methods as merge_methods
+
+    def identity(m1: GridMap, m2: GridMap, rng: np.random.Generator) -> np.ndarray:
+        return np.zeros(3)
+
+    monkeypatch.setattr(merge_methods, "_METHODS", {"identity": (identity, ())})
+    argv = ["bench", "merge", "--set", "cuts", "--cut-pairs", "4", "--seed", "2"]
+    argv += ["--methods", "identity", "--variants", "none", "--no-aliasing"]
+    out = tmp_path / "rows.json"
+    assert main([*argv, "--cache", str(tmp_path), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "4 pairs (4 overlapping)" in printed and "| | identity |" in printed
+    rows = json.loads(out.read_text())["rows"]
+    assert [row["scenario"].startswith("cut:") for row in rows] == [True] * 4
+    assert {row["family"] for row in rows} == {"real"}
+    # a turned map 2 is never at the identity: a wrong answer on every pair
+    assert all(row["outcome"] == "wrong" for row in rows)
+    assert len(list(tmp_path.glob("cuts-v*-n4-seed2-*/manifest.json"))) == 1
