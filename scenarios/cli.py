@@ -9,6 +9,7 @@
 ``mrslam bench soak``          one long run with SLAM and the team: steps/s and memory
 ``mrslam bench merge``         map merging: our pipeline against the random walk alone and
                                the ROS map_merge feature baseline, on simulated map pairs
+                               (``--set cuts``: on pairs cut from the real map files)
 
 Exit codes: 0 done; 2 bad input (unknown scenario, unreadable map, bad values, an output
 that would overwrite an input), printed as one line ``mrslam: error: ...``; 3 ``mrslam
@@ -224,13 +225,18 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     merge.add_argument(
         "--set",
-        choices=("both", "builtin", "real"),
+        choices=("both", "builtin", "real", "cuts"),
         default="both",
         help="default pair sets: the built-in worlds (--pairs), the real buildings "
-        "(--real-pairs), or both side by side (default); ignored with --worlds/--maps",
+        "(--real-pairs), or both side by side (default); cuts: pairs cut from the six real map "
+        "files at their native resolution, map 2 turned by a random angle, with disjoint and "
+        "different-building pairs (--cut-pairs); ignored with --worlds/--maps",
     )
     merge.add_argument(
         "--real-pairs", type=int, default=24, help="pairs of the real-building set (default 24)"
+    )
+    merge.add_argument(
+        "--cut-pairs", type=int, default=24, help="pairs of the cut set (default 24)"
     )
     merge.add_argument(
         "--worlds",
@@ -623,6 +629,7 @@ def _run_bench_explore(
 
 def _cmd_bench_merge(args: argparse.Namespace) -> int:
     from scenarios.bench.merge.aliasing import load_or_compute_aliasing
+    from scenarios.bench.merge.cuts import CutConfig, load_or_generate_cut_pairs
     from scenarios.bench.merge.methods import resolve_methods
     from scenarios.bench.merge.pairs import (
         REAL_WORLDS,
@@ -646,7 +653,8 @@ def _cmd_bench_merge(args: argparse.Namespace) -> int:
     names = [name.strip() for name in args.methods.split(",") if name.strip()]
     if not names:
         raise ValueError("--methods names no method")
-    for option, count in (("--pairs", args.pairs), ("--real-pairs", args.real_pairs)):
+    counts = (("--pairs", args.pairs), ("--real-pairs", args.real_pairs))
+    for option, count in (*counts, ("--cut-pairs", args.cut_pairs)):
         if count < 1:
             raise ValueError(f"{option} must be >= 1, got {count}")
     variants = [v.strip() for v in args.variants.split(",") if v.strip() and v.strip() != "none"]
@@ -660,7 +668,7 @@ def _cmd_bench_merge(args: argparse.Namespace) -> int:
 
     # (title, config, variants); the built-in set's config is the historical default, so
     # its cache key and figures stay comparable across releases
-    sets: list[tuple[str, PairGenerationConfig, list[str]]] = []
+    sets: list[tuple[str, PairGenerationConfig | CutConfig, list[str]]] = []
     if args.worlds or args.maps:
         config = PairGenerationConfig(
             n_pairs=args.pairs,
@@ -679,36 +687,50 @@ def _cmd_bench_merge(args: argparse.Namespace) -> int:
                 n_pairs=args.real_pairs, seed=args.seed, worlds=REAL_WORLDS, native_resolution=True
             )
             sets.append(("real buildings", config, variants))
+        if args.set == "cuts":
+            sets.append(
+                (
+                    "cut from the real maps",
+                    CutConfig(n_pairs=args.cut_pairs, seed=args.seed),
+                    variants,
+                )
+            )
 
     all_rows: list[dict[str, Any]] = []
     results = []
-    for title, config, set_variants in sets:
-        pairs, manifest = load_or_generate_pairs(
-            config,
-            args.cache,
-            regenerate=args.regenerate,
-            progress=progress,
-            jobs=args.jobs,
-            ray=args.ray,
-        )
+    for title, pair_set, set_variants in sets:
+        if isinstance(pair_set, CutConfig):
+            pairs, manifest = load_or_generate_cut_pairs(
+                pair_set, args.cache, regenerate=args.regenerate, progress=progress
+            )
+        else:
+            pairs, manifest = load_or_generate_pairs(
+                pair_set,
+                args.cache,
+                regenerate=args.regenerate,
+                progress=progress,
+                jobs=args.jobs,
+                ray=args.ray,
+            )
         rows = run_merge_benchmark(
             pairs, methods, seed=args.seed, variants=set_variants, progress=progress
         )
         if not args.no_aliasing:
-            folder = Path(args.cache) / config.cache_key()
+            folder = Path(args.cache) / pair_set.cache_key()
             labels = load_or_compute_aliasing(pairs, folder, progress=progress)
             for row in rows:
                 found = labels.get(row["pair_id"])
                 row["aliasing"] = None if found is None else found.label
                 row["aliasing_ratio"] = None if found is None else found.ratio
                 row["aliasing_dominated"] = None if found is None else found.dominated
-            twins = load_or_compute_world_twins(
-                pairs, folder, worlds=config.world, progress=progress
-            )
-            for row in rows:
-                twin = twins.get(row["pair_id"])
-                row["undecidable"] = None if twin is None else twin.undecidable
-                row["twin_overlap"] = None if twin is None else twin.twin_overlap
+            if isinstance(pair_set, PairGenerationConfig):  # cut pairs have no world
+                twins = load_or_compute_world_twins(
+                    pairs, folder, worlds=pair_set.world, progress=progress
+                )
+                for row in rows:
+                    twin = twins.get(row["pair_id"])
+                    row["undecidable"] = None if twin is None else twin.undecidable
+                    row["twin_overlap"] = None if twin is None else twin.twin_overlap
         bases = [m for m in ("ours", "ours-nocrop") if m in methods]
         columns = list(methods) + [f"{m}+{v}" for v in set_variants for m in bases]
         for row in rows:

@@ -41,6 +41,15 @@ variants of each pair (map 2 padded to 4000² cells, with an origin yaw, at anot
 resolution; :mod:`scenarios.bench.merge.run`), and each pipeline row records whether the
 truth was among its candidates (the proposal recall).
 
+Pairs cut from the real map files
+---------------------------------
+``mrslam bench merge --set cuts`` (:mod:`scenarios.bench.merge.cuts`) cuts pairs from the six
+real map files themselves at their native resolution (ragged walls, clutter, up to about
+1,000 cells a side): two windows of one map, map 2 turned by a random angle about a random
+point and re-rasterised (the truth is exact), overlaps stratified like the simulated sets,
+plus disjoint windows and windows of two different buildings (both without overlap). The
+same methods, rows and reports run on them; the twin test needs a world and is skipped.
+
 Methods
 -------
 Each is ``(m1, m2, rng) -> map1_from_map2 (3,) or None`` (None = "no confident merge"):

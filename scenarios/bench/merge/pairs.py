@@ -56,10 +56,12 @@ MAP_PREFIX = "map:"
 
 
 def world_family(scenario: str) -> str:
-    """``"real"`` for a real building or a world from a map file, else ``"built-in"``."""
+    """``"real"`` for a real building, a world from a map file or a pair cut from a real
+    map (``cut:...``, :mod:`scenarios.bench.merge.cuts`), else ``"built-in"``."""
     from scenarios.worlds.real import REAL_BUILDINGS
 
-    return "real" if scenario in REAL_BUILDINGS or scenario.startswith(MAP_PREFIX) else "built-in"
+    real = scenario in REAL_BUILDINGS or scenario.startswith((MAP_PREFIX, "cut:"))
+    return "real" if real else "built-in"
 
 
 def map_label(path: str | Path) -> str:
