@@ -97,6 +97,7 @@ __all__ = [
     "TeamState",
     "distinct_hypotheses",
     "in_plain_sight",
+    "radio_contradiction",
     "window",
 ]
 
@@ -131,6 +132,20 @@ class TeamConfig:
     """A hypothesis that puts the robots closer than ``peer_range - sight_margin``
     (:attr:`in_sight_range`, m) is verified where they stand, without a rendezvous drive;
     the margin keeps the prediction's error inside the sensor's range (m, >= 0)."""
+    comm_range: float = DEFAULT_ENV.comm.comm_range
+    """The radio's range, m: the env's ``CommConfig.comm_range`` (:meth:`for_env`)."""
+    comm_exact: bool = not DEFAULT_ENV.comm.blocked_by_walls and not DEFAULT_ENV.comm.packet_loss
+    """Whether the link is up exactly when the robots are within ``comm_range`` (the env's
+    ``CommConfig``: not blocked by walls, no packet loss; :meth:`for_env`). Then a link
+    down says the robots are further apart than ``comm_range``; a link up always says
+    they are within it."""
+    radio_margin: float | None = 1.0
+    """The radio as a range sensor (design §6): a hypothesis that puts the robots more
+    than ``comm_range`` plus this margin (m) apart on a step the link was up, or (with
+    ``comm_exact``) closer than ``comm_range`` less the margin on a step it was down, is
+    rejected without a rendezvous, on the robots' whole tracks when it is formed and
+    on every step while it is tested. The margin covers the error of a true hypothesis
+    at the robots and the SLAM poses' (None: the radio is not used)."""
     interaction: bool = True
     """False: the robots never interact (the independent-exploration baseline)."""
     keep_merges: bool = False
@@ -219,7 +234,7 @@ class TeamConfig:
                 "sighting_verify_distance",
                 "departure_share",
             ),
-            positive=("peer_range",),
+            positive=("peer_range", "comm_range"),
             counts=(
                 "max_rendezvous",
                 "merged_map_every",
@@ -240,6 +255,8 @@ class TeamConfig:
         require(name, "regrow_factor", factor, ok, "a finite number >= 1")
         if self.undecided_wait is not None:
             check_fields(self, whole=("undecided_wait",))
+        if self.radio_margin is not None:
+            check_fields(self, non_negative=("radio_margin",))
         margin, peer_range = self.sight_margin, self.peer_range
         require(name, "sight_margin", margin, margin < peer_range, f"< peer_range ({peer_range})")
 
@@ -250,8 +267,14 @@ class TeamConfig:
 
     @staticmethod
     def env_figures(env: EnvConfig) -> EnvFigures:
-        """The fields that are the env's figures: the peer sensor's range."""
-        return {"peer_range": ("peer.detect_range", env.peer.detect_range)}
+        """The fields that are the env's figures: the peer sensor's range, the radio's
+        range and whether the link is up exactly within it."""
+        exact = not env.comm.blocked_by_walls and not env.comm.packet_loss
+        return {
+            "peer_range": ("peer.detect_range", env.peer.detect_range),
+            "comm_range": ("comm.comm_range", env.comm.comm_range),
+            "comm_exact": ("comm.blocked_by_walls and comm.packet_loss", exact),
+        }
 
     @classmethod
     def for_env(cls, env: EnvConfig, **overrides: Any) -> TeamConfig:
@@ -375,6 +398,31 @@ def distinct_hypotheses(
         if not any(same_answer(transform, known, pivot, config) for known in rejected + kept):
             kept.append(transform)
     return kept
+
+
+def radio_contradiction(
+    hypothesis: FloatArray,
+    track0: FloatArray,
+    track1: FloatArray,
+    link: NDArray[np.bool_],
+    *,
+    comm_range: float,
+    exact: bool,
+) -> float:
+    """How far (m) ``hypothesis`` (``side0_from_side1``) puts two robots outside what
+    their radio link said, at worst over the steps given: on a step the link was up, the
+    amount by which the robots' distance under the hypothesis exceeds ``comm_range``; on
+    one it was down (only if the link is up ``exact``-ly within ``comm_range``), the
+    amount by which it falls short of it. ``track0`` (T, 2) and ``track1`` (T, 2) are the
+    robots' positions in their side's frame on those steps, ``link`` (T,) whether the
+    link was up. Negative (or -inf for no step) when the hypothesis agrees with the
+    radio."""
+    if len(link) == 0:
+        return -math.inf
+    predicted = transform_points(hypothesis, np.asarray(track1, dtype=np.float64))
+    distance = np.hypot(*(predicted - np.asarray(track0, dtype=np.float64)).T)
+    down = comm_range - distance if exact else np.full_like(distance, -math.inf)
+    return float(np.where(link, distance - comm_range, down).max())
 
 
 def _either_in_sight(
@@ -561,6 +609,12 @@ class TeamCoordinator:
         other, each with the relative pose of their groups' frames it gives."""
         self.sighting_hypotheses = 0
         """Hypotheses formed from sightings (:attr:`TeamConfig.sighting_count`)."""
+        self._tracks: list[list[FloatArray]] = [[] for _ in range(n)]
+        """Per robot, its position (own map frame) on every step so far."""
+        self._link_track: list[NDArray[np.bool_]] = []
+        """The links between the robots (n, n) on every step so far."""
+        self.radio_rejections = 0
+        """Hypotheses rejected by the radio (:attr:`TeamConfig.radio_margin`)."""
 
     @classmethod
     def for_env(
@@ -702,6 +756,10 @@ class TeamCoordinator:
                 up = up and bool(observations[j]["comm"][_row(j, i)])
                 links[i, j] = links[j, i] = up
         self._links, self._reach = links, _reachable(links)
+        if self.config.interaction and self.config.radio_margin is not None:
+            for i in range(n):
+                self._tracks[i].append(self._poses[i][:2].copy())
+            self._link_track.append(links)
         self._observe_pair(observations)
         if self.config.interaction:
             self._seek_contact()
@@ -955,6 +1013,7 @@ class TeamCoordinator:
             pivot,
             self.config.merge,
         )
+        fresh = [h for h in fresh if not self._radio_rejects(h, "from the merge")]
         self.hypotheses = fresh[: self.config.max_rendezvous]
         # Rivals: one meeting cannot tell which of two open answers is right, more map
         # may; the merge's own answer (if it gave one) is still driven to at once.
@@ -1048,6 +1107,10 @@ class TeamCoordinator:
         if conflict is not None:
             self._decide(f"{seen}; rejected, the maps conflict there ({conflict})")
             return False
+        why = self._radio_refutes(transform)
+        if why is not None:
+            self._decide(f"{seen}; rejected by {why}")
+            return False
         self.hypotheses = [transform]
         self.rendezvous = _Rendezvous(
             hypothesis=transform,
@@ -1109,6 +1172,53 @@ class TeamCoordinator:
             self._decide(f"the hypothesis {kind} waits on for a later meeting")
         else:
             self._decide(f"the hypothesis {kind} is set aside for the merge's")
+
+    def _radio_excess(self, hypothesis: FloatArray, last: int | None = None) -> float:
+        """:func:`radio_contradiction` of ``hypothesis`` (the current pair's) on the pair's
+        tracks, each position in its group root's frame: on every step so far, or on the
+        ``last`` steps."""
+        a, b = self.pair
+        steps = slice(-last if last else None, None)
+        tracks = []
+        for robot in (a, b):
+            track = np.asarray(self._tracks[robot][steps], dtype=np.float64)
+            if self.roots[robot] != robot:
+                track = transform_points(self.frames[robot], track)
+            tracks.append(track)
+        link = np.array([links[a, b] for links in self._link_track[steps]], dtype=bool)
+        return radio_contradiction(
+            hypothesis,
+            tracks[0],
+            tracks[1],
+            link,
+            comm_range=self.config.comm_range,
+            exact=self.config.comm_exact,
+        )
+
+    def _radio_refutes(self, hypothesis: FloatArray, *, last: int | None = None) -> str | None:
+        """Why the radio rejects ``hypothesis`` (:attr:`TeamConfig.radio_margin`), judged
+        on every step so far or on the ``last`` steps; None when it does not."""
+        margin = self.config.radio_margin
+        if margin is None:
+            return None
+        excess = self._radio_excess(hypothesis, last)
+        if excess <= margin:
+            return None
+        self.radio_rejections += 1
+        return f"the radio: it puts the robots {excess:.1f} m beyond what the link said"
+
+    def _radio_rejects(self, hypothesis: FloatArray, kind: str, *, last: int | None = None) -> bool:
+        """Whether the radio rejects ``hypothesis`` (:meth:`_radio_refutes`); a rejected
+        one is logged and kept among the pair's rejected hypotheses."""
+        why = self._radio_refutes(hypothesis, last=last)
+        if why is None:
+            return False
+        self.rejected.append(hypothesis)
+        x, y, theta = hypothesis
+        self._decide(
+            f"hypothesis (x {x:.2f}, y {y:.2f}, theta {theta:.3f}) {kind} rejected by {why}"
+        )
+        return True
 
     def _map_check(self, m0: GridMap, m1: GridMap, transform: FloatArray) -> str | None:
         """Why the maps conflict at ``transform`` (the merge's conflict check, at its
@@ -1314,6 +1424,16 @@ class TeamCoordinator:
         if hold is not None and self.step >= hold[1] and not rendezvous.in_place:
             rendezvous.hold = None
             self._send(hold[0], self._meeting_goal(rendezvous, hold[0]))
+        # The radio on this step: for the hypothesis under test (a rendezvous drive ends
+        # as soon as the link says the robots are not where it puts them) and for those
+        # waiting their turn.
+        for hypothesis in self.hypotheses[rendezvous.index + 1 :]:
+            if not any(hypothesis is rejected for rejected in self.rejected):
+                self._radio_rejects(hypothesis, "waiting its turn", last=1)
+        why = self._radio_refutes(rendezvous.hypothesis, last=1)
+        if why is not None:
+            self._reject(rendezvous, maps, why)
+            return
         poses = [np.asarray(o["pose"], dtype=np.float64) for o in observations]
         if link and self._moved_off(rendezvous, poses):
             if rendezvous.previous is not None:
@@ -1529,8 +1649,12 @@ class TeamCoordinator:
         self._start_rendezvous(rendezvous.index + 1, maps)
 
     def _accept(self, rendezvous: _Rendezvous, maps: MapSource, how: str, error: float) -> None:
+        radio = ""
+        if self.config.radio_margin is not None:
+            radio = f"; radio {self._radio_excess(rendezvous.hypothesis):+.2f} m"
         self._decide(
-            f"hypothesis #{rendezvous.index} accepted: {how} (last sighting {error:.2f} m off)"
+            f"hypothesis #{rendezvous.index} accepted: {how} (last sighting {error:.2f} m "
+            f"off{radio})"
         )
         m0, m1 = maps(0), maps(1)
         verified_at = self._last_poses[1][:2].copy()

@@ -462,6 +462,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                 "first_hypothesis_step": team.first_hypothesis_step,
                 "first_rendezvous_step": team.first_rendezvous_step,
                 "rendezvous_steps": team.rendezvous_steps,
+                "radio_rejections": team.radio_rejections,
             }
             if len(agents) > 2:
                 merge_report["joined"] = len(joined)

@@ -3,6 +3,7 @@ a wrong one; without interaction nothing is merged."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -16,9 +17,10 @@ from agents.team import (
     _Rendezvous,
     distinct_hypotheses,
     in_plain_sight,
+    radio_contradiction,
     window,
 )
-from mrslam_env.config import EnvConfig
+from mrslam_env.config import CommConfig, EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
 from mrslam_env.geometry import compose, inverse, mean_pose
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
@@ -724,3 +726,87 @@ def test_the_robot_nearer_the_meeting_point_explores_on_before_it_leaves() -> No
         TeamConfig(departure_share=-0.5)
     with pytest.raises(ValueError, match="undecided_wait"):
         TeamConfig(undecided_wait=-1)
+
+
+def test_the_radio_contradicts_a_placement_the_link_rules_out() -> None:
+    # Robot 0 walks along x; robot 1, in a frame turned half round and 10 m along, walks
+    # back towards it: 10 m apart at first, 2 m at the end. The link (12 m) is up.
+    steps = np.linspace(0.0, 4.0, 9)
+    track0 = np.stack([steps, np.zeros_like(steps)], axis=1)
+    truth = np.array([10.0, 0.0, np.pi])
+    track1 = np.stack([steps, np.zeros_like(steps)], axis=1)  # own frame: +x is world -x
+    up = np.ones(len(steps), dtype=bool)
+    kwargs = {"comm_range": 12.0, "exact": True}
+    assert radio_contradiction(truth, track0, track1, up, **kwargs) == pytest.approx(-2.0)
+    # A mirrored placement 25 m away: 21-25 m apart while the link was up.
+    mirrored = np.array([25.0, 0.0, 0.0])
+    assert radio_contradiction(mirrored, track0, track1, up, **kwargs) == pytest.approx(13.0)
+    # A link down says they were further than 12 m apart, only if the link is up exactly
+    # within its range (no walls, no packet loss).
+    down = np.zeros(len(steps), dtype=bool)
+    assert radio_contradiction(truth, track0, track1, down, **kwargs) == pytest.approx(10.0)
+    inexact = {"comm_range": 12.0, "exact": False}
+    assert radio_contradiction(truth, track0, track1, down, **inexact) == -np.inf
+    assert radio_contradiction(truth, track0[:0], track1[:0], up[:0], **kwargs) == -np.inf
+
+
+def test_the_team_takes_the_radios_figures_from_the_env() -> None:
+    env = EnvConfig(comm=CommConfig(comm_range=8.0, packet_loss=0.1))
+    config = TeamConfig.for_env(env)
+    assert config.comm_range == 8.0 and not config.comm_exact
+    assert TeamConfig.for_env(EnvConfig()).comm_exact
+    with pytest.raises(ValueError, match="comm_range"):
+        TeamConfig().check_env(env)
+
+
+def test_a_merge_answer_the_radio_rules_out_is_rejected_without_a_drive(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The robots start 5 m apart, the link up. The merge gives two confident answers: one
+    # puts robot 1 about 20 m from robot 0 (ruled out by the link), and the truth.
+    # Before the radio rule both were rivals, left waiting; now the wrong one is rejected
+    # at once and the truth, standing alone, is put to verification.
+    env = MultiRobotSlamEnv(scenario="office", seed=0, config=EnvConfig(starts=STARTS))
+    observations, _ = env.reset()
+    maps = MapCache(env)
+    team = TeamCoordinator(TeamConfig(min_map_area=0.0), rng=np.random.default_rng(0))
+    team._retry_area = {(0, 1): np.inf}
+    _run_team(env, team, maps, observations, 5)
+    far = compose(TRUE_TRANSFORM, [-15.0, 0.0, 0.0])
+    answers = [SimpleNamespace(map1_from_map2=h, confident=True) for h in (far, TRUE_TRANSFORM)]
+    result = SimpleNamespace(transform=None, hypotheses=answers)
+    monkeypatch.setattr("agents.team.merge_maps", lambda *args, **kwargs: result)
+    team._retry_area = {}
+    team._link = True
+    assert team._generate(team._side_maps(maps))
+    decisions = [d.text for d in team.pop_decisions()]
+    assert any("rejected by the radio" in d for d in decisions), decisions
+    assert len(team.rejected) == 1 and team.rejected[0] is far
+    assert team.radio_rejections == 1
+    assert team.rendezvous is not None and team.rendezvous.hypothesis is TRUE_TRANSFORM
+    assert not team.rendezvous.waits, decisions
+
+
+def test_a_drive_ends_when_the_link_drops_where_the_hypothesis_keeps_them_near() -> None:
+    # A wrong hypothesis puts robot 1 6 m from robot 0 (in radio range) and is driven
+    # to; the link then drops (here: hidden from the team, as are the sightings), which
+    # the hypothesis cannot explain: it is rejected on that step, not after the drive.
+    wrong = compose(TRUE_TRANSFORM, [-1.0, 0.0, 0.0])
+    env, team, maps, observations = _undecided_team(wrong, wait=300)
+    team._rest()
+    team._undecided = []
+    team.hypotheses = [wrong]
+    team._meeting_point = lambda hypothesis, maps, avoid=None: (np.array([2.5, 0.1]), 3.0)  # type: ignore[method-assign]
+    team._start_rendezvous(0, maps)
+    assert team.rendezvous is not None and not team.rendezvous.in_place
+
+    def link_down(step: int, given: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        blind = [{**o, "peer": np.zeros_like(o["peer"])} for o in given]
+        if step < 3:
+            return blind
+        return [{**o, "comm": np.zeros_like(o["comm"])} for o in blind]
+
+    decisions, _, _ = _run_team(env, team, maps, observations, 4, seen=link_down)
+    assert any("rejected: the radio" in d for d in decisions), decisions
+    assert team.rejected and team.rejected[0] is wrong
+    assert team.rendezvous is None and not any(team._on_goal)
