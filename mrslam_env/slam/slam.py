@@ -247,7 +247,8 @@ class RobotSlam:
     ) -> None:
         self.grid.integrate_scan(pose, scan, self.max_range, normals)
         if self._matched_grid is not self.grid:
-            self._waiting.append((pose, scan, normals))
+            # Copies: the caller may reuse its scan buffer.
+            self._waiting.append((pose, scan.copy(), None if normals is None else normals.copy()))
             self._catch_up(0 if self.n_integrated == 0 else self.config.match_lag)
         self._mapped_pose = pose
         self._reference_pose = pose
