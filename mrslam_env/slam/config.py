@@ -282,6 +282,17 @@ class SlamConfig:
     worse end to end, with the SLAM before its field fixes; not re-measured since)."""
     map_update_rotation: float = math.radians(2.0)
     """... or turned this much, rad."""
+    match_lag: int = 20
+    """Scans are matched against the map as it was this many integrated scans ago (0: the
+    current map); the map itself (:attr:`~mrslam_env.slam.slam.RobotSlam.grid`) takes
+    every scan at once, so each scan is integrated twice (into the map now, into the
+    matched map later). A rejected match lets the waiting scans into the matched map at
+    once (e.g. the robot has driven past what the matched map covers). Against the
+    current map each scan inherits the last scans' heading errors and passes them on;
+    against a map 20 scans old, 20 scans in a row are placed independently and their
+    errors average out in the map. 20 (1 m at the motion filter's 5 cm): chosen on the
+    replays of two team runs whose maps were 0.2-0.3 degrees off (10 less good, 40 let the
+    matched map fall behind the robot and matches failed; docs/decisions.md)."""
     integrate_rejected_after: int = 10
     """A scan whose match is rejected is not integrated (the pose follows odometry), unless
     this many matches in a row have been rejected: then it is integrated at the odometry
@@ -300,6 +311,7 @@ class SlamConfig:
                 "map_update_rotation",
             ),
             counts=("integrate_rejected_after",),
+            whole=("match_lag",),
         )
         for name, cls in (("grid", GridConfig), ("matcher", MatcherConfig)):
             value = getattr(self, name)

@@ -10,12 +10,21 @@ Per update (``mode="slam"``):
    scan (``pose_k = pose_ref ∘ inverse(odom_ref) ∘ odom_k``).
 2. **Motion filter**: unless the robot has moved ``min_translation`` or turned
    ``min_rotation`` since the last matched scan, stop here (the prediction is the pose).
-3. **Match** the scan to the map from the prediction
-   (:func:`~mrslam_env.slam.matcher.match_scan`); if the match is rejected, keep the
-   prediction (fall back to odometry) and do not integrate the scan, unless
+3. **Match** the scan from the prediction
+   (:func:`~mrslam_env.slam.matcher.match_scan`) to the map *as it was* ``match_lag``
+   integrated scans ago (the *matched map*: the map without its newest scans, which wait
+   to enter it); if the match is rejected, the waiting scans enter the matched map at
+   once, the prediction is kept (odometry) and the scan is not integrated, unless
    ``integrate_rejected_after`` matches in a row have failed (then mapping goes on with
-   odometry, e.g. into an area the map does not cover yet).
-4. **Integrate** the scan at the resulting pose (:meth:`OccupancyGrid.integrate_scan`),
+   odometry, e.g. into an area the map does not cover yet). Why the lag: matched against
+   the current map, each scan inherits the heading errors of the scans just before it,
+   which it would then pass on; on the walls of real buildings (the raster outline of a
+   map) a scan matched against a young map is off by up to ~0.2°, and the errors of the
+   first scans chained into a map a quarter degree off. Matched against the map of 20
+   scans ago, those scans are placed independently against a common map and their errors
+   average out in it (docs/decisions.md, "Onboard SLAM").
+4. **Integrate** the scan at the resulting pose (:meth:`OccupancyGrid.integrate_scan`)
+   into the map (:attr:`RobotSlam.grid`, always current) and queue it for the matched map,
    but only once the robot has moved ``map_update_translation`` or turned
    ``map_update_rotation`` since the last integrated scan (a scan matched but not
    integrated still sets the pose). The defaults equal the motion filter's, so every
@@ -95,7 +104,11 @@ class RobotSlam:
         self.config = config if config is not None else SlamConfig()
         self.n_beams = n_beams
         self.max_range = float(max_range)
-        self.grid = OccupancyGrid(self.config.grid)
+        lag = self.config.match_lag if self.config.mode == "slam" else 0
+        # With a lag, the map is never matched against: it needs no likelihood fields.
+        self.grid = OccupancyGrid(self.config.grid, fields=lag == 0)
+        self._matched_grid = OccupancyGrid(self.config.grid) if lag > 0 else self.grid
+        self._waiting: list[tuple[tuple[float, float, float], FloatArray, FloatArray | None]] = []
         self._pose = (0.0, 0.0, 0.0)
         self._reference_pose: tuple[float, float, float] | None = None
         self._reference_odom = (0.0, 0.0, 0.0)
@@ -191,7 +204,7 @@ class RobotSlam:
         normals = scan_normals(scan, self.max_range, self.config.grid.min_range)
         if mode == "slam":
             result = match_scan(
-                self.grid,
+                self._matched_grid,
                 scan,
                 self.max_range,
                 np.array(predicted),
@@ -206,6 +219,7 @@ class RobotSlam:
             if not result.accepted:
                 self.n_rejected += 1
                 self._rejected_in_a_row += 1
+                self._catch_up(0)
                 if self._rejected_in_a_row < self.config.integrate_rejected_after:
                     # A scan placed by odometry alone would smear a wrong copy of the walls
                     # into the map; keep the reference, so the next window is wider.
@@ -232,10 +246,20 @@ class RobotSlam:
         normals: FloatArray | None = None,
     ) -> None:
         self.grid.integrate_scan(pose, scan, self.max_range, normals)
+        if self._matched_grid is not self.grid:
+            # Copies: the caller may reuse its scan buffer.
+            self._waiting.append((pose, scan.copy(), None if normals is None else normals.copy()))
+            self._catch_up(0 if self.n_integrated == 0 else self.config.match_lag)
         self._mapped_pose = pose
         self._reference_pose = pose
         self._reference_odom = odom
         self.n_integrated += 1
+
+    def _catch_up(self, lag: int) -> None:
+        """Integrate into the matched map the waiting scans but the last ``lag``."""
+        while len(self._waiting) > lag:
+            pose, scan, normals = self._waiting.pop(0)
+            self._matched_grid.integrate_scan(pose, scan, self.max_range, normals)
 
     def _record(self, pose: tuple[float, float, float]) -> FloatArray:
         self._pose = pose
