@@ -612,6 +612,7 @@ class TeamCoordinator:
         self._tracks: list[list[FloatArray]] = [[] for _ in range(n)]
         """Per robot, its position (own map frame) on every step so far."""
         self._link_track: list[NDArray[np.bool_]] = []
+        self._radio_since = 0  # the first track step the next per-step radio check judges
         """The links between the robots (n, n) on every step so far."""
         self.radio_rejections = 0
         """Hypotheses rejected by the radio (:attr:`TeamConfig.radio_margin`)."""
@@ -1173,15 +1174,19 @@ class TeamCoordinator:
         else:
             self._decide(f"the hypothesis {kind} is set aside for the merge's")
 
-    def _radio_excess(self, hypothesis: FloatArray, last: int | None = None) -> float:
+    def _radio_excess(self, hypothesis: FloatArray, since: int = 0) -> float:
         """:func:`radio_contradiction` of ``hypothesis`` (the current pair's) on the pair's
-        tracks, each position in its group root's frame: on every step so far, or on the
-        ``last`` steps."""
+        tracks, each position in its group root's frame, from step ``since`` (an index into
+        the tracks) to the last step the pair's link was up: a robot's positions reach its
+        partner only over the link, so the steps it was down are judged when it is back."""
         a, b = self.pair
-        steps = slice(-last if last else None, None)
+        end = len(self._link_track)
+        while end > since and not self._link_track[end - 1][a, b]:
+            end -= 1
+        steps = slice(since, end)
         tracks = []
         for robot in (a, b):
-            track = np.asarray(self._tracks[robot][steps], dtype=np.float64)
+            track = np.asarray(self._tracks[robot][steps], dtype=np.float64).reshape(-1, 2)
             if self.roots[robot] != robot:
                 track = transform_points(self.frames[robot], track)
             tracks.append(track)
@@ -1195,22 +1200,22 @@ class TeamCoordinator:
             exact=self.config.comm_exact,
         )
 
-    def _radio_refutes(self, hypothesis: FloatArray, *, last: int | None = None) -> str | None:
+    def _radio_refutes(self, hypothesis: FloatArray, *, since: int = 0) -> str | None:
         """Why the radio rejects ``hypothesis`` (:attr:`TeamConfig.radio_margin`), judged
-        on every step so far or on the ``last`` steps; None when it does not."""
+        on the steps from ``since`` (:meth:`_radio_excess`); None when it does not."""
         margin = self.config.radio_margin
         if margin is None:
             return None
-        excess = self._radio_excess(hypothesis, last)
+        excess = self._radio_excess(hypothesis, since)
         if excess <= margin:
             return None
         self.radio_rejections += 1
         return f"the radio: it puts the robots {excess:.1f} m beyond what the link said"
 
-    def _radio_rejects(self, hypothesis: FloatArray, kind: str, *, last: int | None = None) -> bool:
+    def _radio_rejects(self, hypothesis: FloatArray, kind: str, *, since: int = 0) -> bool:
         """Whether the radio rejects ``hypothesis`` (:meth:`_radio_refutes`); a rejected
         one is logged and kept among the pair's rejected hypotheses."""
-        why = self._radio_refutes(hypothesis, last=last)
+        why = self._radio_refutes(hypothesis, since=since)
         if why is None:
             return False
         self.rejected.append(hypothesis)
@@ -1424,16 +1429,18 @@ class TeamCoordinator:
         if hold is not None and self.step >= hold[1] and not rendezvous.in_place:
             rendezvous.hold = None
             self._send(hold[0], self._meeting_goal(rendezvous, hold[0]))
-        # The radio on this step: for the hypothesis under test (a rendezvous drive ends
-        # as soon as the link says the robots are not where it puts them) and for those
-        # waiting their turn.
-        for hypothesis in self.hypotheses[rendezvous.index + 1 :]:
-            if not any(hypothesis is rejected for rejected in self.rejected):
-                self._radio_rejects(hypothesis, "waiting its turn", last=1)
-        why = self._radio_refutes(rendezvous.hypothesis, last=1)
-        if why is not None:
-            self._reject(rendezvous, maps, why)
-            return
+        # The radio on the steps since the last check, once the link is up (the partner's
+        # positions come over it): for the hypothesis under test (a drive ends as soon as
+        # the link says the robots are not where it puts them) and those waiting their turn.
+        if link:
+            since, self._radio_since = self._radio_since, len(self._link_track)
+            for hypothesis in self.hypotheses[rendezvous.index + 1 :]:
+                if not any(hypothesis is rejected for rejected in self.rejected):
+                    self._radio_rejects(hypothesis, "waiting its turn", since=since)
+            why = self._radio_refutes(rendezvous.hypothesis, since=since)
+            if why is not None:
+                self._reject(rendezvous, maps, why)
+                return
         poses = [np.asarray(o["pose"], dtype=np.float64) for o in observations]
         if link and self._moved_off(rendezvous, poses):
             if rendezvous.previous is not None:

@@ -787,10 +787,12 @@ def test_a_merge_answer_the_radio_rules_out_is_rejected_without_a_drive(
     assert not team.rendezvous.waits, decisions
 
 
-def test_a_drive_ends_when_the_link_drops_where_the_hypothesis_keeps_them_near() -> None:
+def test_a_drive_ends_when_the_link_is_back_after_a_drop_the_hypothesis_cannot_explain() -> None:
     # A wrong hypothesis puts robot 1 6 m from robot 0 (in radio range) and is driven
-    # to; the link then drops (here: hidden from the team, as are the sightings), which
-    # the hypothesis cannot explain: it is rejected on that step, not after the drive.
+    # to; the link then drops for two steps (here: hidden from the team, as are the
+    # sightings), which the hypothesis cannot explain. The partner's positions on those
+    # steps reach the robot only over the link, so the drive goes on while it is down and
+    # ends on the step it is back, not after the drive.
     wrong = compose(TRUE_TRANSFORM, [-1.0, 0.0, 0.0])
     env, team, maps, observations = _undecided_team(wrong, wait=300)
     team._rest()
@@ -800,13 +802,16 @@ def test_a_drive_ends_when_the_link_drops_where_the_hypothesis_keeps_them_near()
     team._start_rendezvous(0, maps)
     assert team.rendezvous is not None and not team.rendezvous.in_place
 
-    def link_down(step: int, given: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    def link_drops(step: int, given: list[dict[str, Any]]) -> list[dict[str, Any]]:
         blind = [{**o, "peer": np.zeros_like(o["peer"])} for o in given]
-        if step < 3:
-            return blind
-        return [{**o, "comm": np.zeros_like(o["comm"])} for o in blind]
+        if step in (3, 4):
+            return [{**o, "comm": np.zeros_like(o["comm"])} for o in blind]
+        return blind
 
-    decisions, _, _ = _run_team(env, team, maps, observations, 4, seen=link_down)
+    decisions, _, observations = _run_team(env, team, maps, observations, 5, seen=link_drops)
+    assert not any("the radio" in d for d in decisions), decisions
+    assert team.rendezvous is not None and not team.rejected
+    decisions, _, _ = _run_team(env, team, maps, observations, 1, seen=link_drops)
     assert any("rejected: the radio" in d for d in decisions), decisions
     assert team.rejected and team.rejected[0] is wrong
     assert team.rendezvous is None and not any(team._on_goal)
