@@ -46,6 +46,7 @@ from mrslam_env.sim.lidar import cast_scan
 from mrslam_env.sim.world import box, ground_truth_map, polygon_edges
 from mrslam_env.slam.config import SlamConfig
 from mrslam_env.slam.slam import RobotSlam
+from scenarios.worlds import real
 
 __all__ = [
     "BUILT_IN_SCENARIOS",
@@ -57,14 +58,7 @@ __all__ = [
 ]
 
 BUILT_IN_SCENARIOS = ("office", "warehouse", "maze", "twin_wings", "procedural-0")
-REAL_BUILDINGS = (
-    "aws_warehouse",
-    "aws_warehouse_lowres",
-    "bookstore",
-    "small_house",
-    "tb3_sandbox",
-    "planner_test",
-)
+REAL_BUILDINGS = tuple(real.REAL_BUILDINGS)
 """Real buildings (maps of published simulation worlds)."""
 DEFAULT_SCENARIOS = BUILT_IN_SCENARIOS + REAL_BUILDINGS
 

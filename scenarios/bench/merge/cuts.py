@@ -52,12 +52,19 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mrslam_env.atomic import write_text_atomic
 from mrslam_env.geometry import inverse, transform_points
 from mrslam_env.gridmap import OCCUPIED, UNKNOWN, GridMap, grid_in_frame
-from mrslam_env.mapio import load_map, save_map
+from mrslam_env.mapio import load_map
 from mrslam_env.validation import check_fields, require
-from scenarios.bench.merge.pairs import DEFAULT_CACHE, MergePair, _file_digest, load_pairs
+from scenarios.bench.merge.pairs import (
+    DEFAULT_CACHE,
+    MergePair,
+    _file_digest,
+    load_pairs,
+    save_pair,
+    write_manifest,
+)
+from scenarios.worlds.real import REAL_BUILDINGS
 
 FloatArray = NDArray[np.float64]
 
@@ -77,14 +84,7 @@ CUT_VERSION = 1
 CUT_PREFIX = "cut:"
 """Scenario label of a cut pair: ``cut:<building>`` (``cut:<b1>+<b2>`` for two buildings)."""
 
-CUT_BUILDINGS = (
-    "aws_warehouse",
-    "aws_warehouse_lowres",
-    "bookstore",
-    "small_house",
-    "tb3_sandbox",
-    "planner_test",
-)
+CUT_BUILDINGS = tuple(REAL_BUILDINGS)
 """The six real maps (:data:`scenarios.worlds.real.REAL_BUILDINGS`), the default sources."""
 
 SAME_BUILDING = {"aws_warehouse_lowres": "aws_warehouse"}
@@ -132,8 +132,6 @@ class CutConfig:
         turn = self.max_turn_deg
         require(name, "max_turn_deg", turn, 0.0 <= turn <= 180.0, "in [0, 180]")
         require(name, "buildings", self.buildings, len(self.buildings) > 0, "one name or more")
-        from scenarios.worlds.real import REAL_BUILDINGS
-
         unknown = [b for b in self.buildings if b not in REAL_BUILDINGS]
         require(name, "buildings", self.buildings, not unknown, f"in {', '.join(REAL_BUILDINGS)}")
         edges = self.overlap_bins
@@ -403,29 +401,10 @@ def generate_cut_pairs(
             info=info,
         )
         pairs.append(pair)
-        save_map(out_dir / f"{pair_id}-m1.yaml", m1)
-        save_map(out_dir / f"{pair_id}-m2.yaml", m2)
-        entries.append(
-            {
-                "pair_id": pair_id,
-                "scenario": scenario,
-                "map1": f"{pair_id}-m1.yaml",
-                "map2": f"{pair_id}-m2.yaml",
-                "map1_from_map2": truth.tolist(),
-                "overlap": overlap,
-                **info,
-            }
-        )
+        entries.append(save_pair(out_dir, pair))
         if progress is not None:
             progress(f"cut {pair_id}: {kind}, overlap {overlap:.2f}, {m2.shape[1]}x{m2.shape[0]}")
-    manifest = {
-        "generator_version": CUT_VERSION,
-        "config": asdict(config),
-        "generation_seconds": time.perf_counter() - started,
-        "shortfall": shortfall,
-        "pairs": entries,
-    }
-    write_text_atomic(out_dir / "manifest.json", json.dumps(manifest, indent=2))
+    write_manifest(out_dir, CUT_VERSION, asdict(config), started, shortfall, entries)
     return pairs
 
 

@@ -548,28 +548,44 @@ def generate_pairs(
             info=info,
         )
         pairs.append(pair)
-        save_map(out_dir / f"{pair_id}-m1.yaml", pair.m1)
-        save_map(out_dir / f"{pair_id}-m2.yaml", pair.m2)
-        entries.append(
-            {
-                "pair_id": pair_id,
-                "scenario": scenario,
-                "map1": f"{pair_id}-m1.yaml",
-                "map2": f"{pair_id}-m2.yaml",
-                "map1_from_map2": truth.tolist(),
-                "overlap": overlap,
-                **info,
-            }
-        )
+        entries.append(save_pair(out_dir, pair))
+    write_manifest(out_dir, GENERATOR_VERSION, asdict(config), started, shortfall, entries)
+    return pairs
+
+
+def save_pair(out_dir: Path, pair: MergePair) -> dict[str, Any]:
+    """Write ``pair``'s two maps into ``out_dir``; its entry in the set's manifest."""
+    save_map(out_dir / f"{pair.pair_id}-m1.yaml", pair.m1)
+    save_map(out_dir / f"{pair.pair_id}-m2.yaml", pair.m2)
+    return {
+        "pair_id": pair.pair_id,
+        "scenario": pair.scenario,
+        "map1": f"{pair.pair_id}-m1.yaml",
+        "map2": f"{pair.pair_id}-m2.yaml",
+        "map1_from_map2": np.asarray(pair.map1_from_map2, dtype=np.float64).tolist(),
+        "overlap": pair.overlap,
+        **pair.info,
+    }
+
+
+def write_manifest(
+    out_dir: Path,
+    version: int,
+    config: dict[str, Any],
+    started: float,
+    shortfall: Any,
+    entries: list[dict[str, Any]],
+) -> None:
+    """The set's ``manifest.json``: generator version, settings, generation time (since
+    ``started``, a :func:`time.perf_counter`), shortfall and the pairs' entries."""
     manifest = {
-        "generator_version": GENERATOR_VERSION,
-        "config": asdict(config),
+        "generator_version": version,
+        "config": config,
         "generation_seconds": time.perf_counter() - started,
         "shortfall": shortfall,
         "pairs": entries,
     }
     write_text_atomic(out_dir / "manifest.json", json.dumps(manifest, indent=2))
-    return pairs
 
 
 def load_pairs(folder: Path) -> tuple[list[MergePair], dict[str, Any]]:
