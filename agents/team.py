@@ -134,7 +134,7 @@ class TeamConfig:
     the margin keeps the prediction's error inside the sensor's range (m, >= 0)."""
     comm_range: float = DEFAULT_ENV.comm.comm_range
     """The radio's range, m: the env's ``CommConfig.comm_range`` (:meth:`for_env`)."""
-    comm_exact: bool = not DEFAULT_ENV.comm.blocked_by_walls and not DEFAULT_ENV.comm.packet_loss
+    comm_exact: bool = DEFAULT_ENV.comm.exact
     """Whether the link is up exactly when the robots are within ``comm_range`` (the env's
     ``CommConfig``: not blocked by walls, no packet loss; :meth:`for_env`). Then a link
     down says the robots are further apart than ``comm_range``; a link up always says
@@ -269,11 +269,10 @@ class TeamConfig:
     def env_figures(env: EnvConfig) -> EnvFigures:
         """The fields that are the env's figures: the peer sensor's range, the radio's
         range and whether the link is up exactly within it."""
-        exact = not env.comm.blocked_by_walls and not env.comm.packet_loss
         return {
             "peer_range": ("peer.detect_range", env.peer.detect_range),
             "comm_range": ("comm.comm_range", env.comm.comm_range),
-            "comm_exact": ("comm.blocked_by_walls and comm.packet_loss", exact),
+            "comm_exact": ("comm.exact", env.comm.exact),
         }
 
     @classmethod

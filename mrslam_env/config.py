@@ -129,6 +129,12 @@ class CommConfig:
         check_fields(self, positive=("comm_range",))
         _require_probability(self, "packet_loss")
 
+    @property
+    def exact(self) -> bool:
+        """Whether the link is up exactly while the robots are within ``comm_range`` (not
+        blocked by walls, no packet loss): then a link down says they are further apart."""
+        return not self.blocked_by_walls and not self.packet_loss
+
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class RewardConfig:
