@@ -611,8 +611,9 @@ class TeamCoordinator:
         self._tracks: list[list[FloatArray]] = [[] for _ in range(n)]
         """Per robot, its position (own map frame) on every step so far."""
         self._link_track: list[NDArray[np.bool_]] = []
-        self._radio_since = 0  # the first track step the next per-step radio check judges
         """The links between the robots (n, n) on every step so far."""
+        self._radio_since = 0
+        """The first track step the next per-step radio check judges (:meth:`_verify`)."""
         self.radio_rejections = 0
         """Hypotheses rejected by the radio (:attr:`TeamConfig.radio_margin`)."""
 
