@@ -107,3 +107,9 @@ def test_the_lattice_pair_is_not_merged_one_row_off(lattice_pair: MergePair) -> 
     if result.transform is not None:
         translation, rotation = _error(result.transform, lattice_pair, pivot)
         assert translation <= 0.25 and rotation <= 2.0, result.reason
+
+
+def test_neighbour_rivals_are_off_with_the_correlation(lattice_pair: MergePair) -> None:
+    # the live team's setting (correlation_candidates=0) turns every correlation source off
+    result = merge_maps(lattice_pair.m1, lattice_pair.m2, MergeConfig(correlation_candidates=0))
+    assert all(h.proposed_by != "neighbour" for h in result.hypotheses)

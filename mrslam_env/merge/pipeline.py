@@ -288,7 +288,8 @@ class MergeConfig:
     its rivals (same rotation, m2's known centre moved by ``distinct_translation`` to
     ``settle_distance``; :func:`~mrslam_env.merge.hypotheses.neighbour_placements`) are
     refined and judged too, so that the truth one period off a repeating structure is
-    among the rivals (0: off; docs/decisions.md, "Neighbour rivals")."""
+    among the rivals (0: off; off too with the correlation off, ``correlation_candidates =
+    0``, the live team's setting; docs/decisions.md, "Neighbour rivals")."""
     settle_walk: RandomWalkConfig = field(default_factory=lambda: _fine_walk(200))
     """The short refinement of each candidate re-judged at the input resolution: the final
     refinement's (``final_random_walk``) with a third of its iterations."""
@@ -904,11 +905,12 @@ def _score(
         extra = [(t, "symmetry") for t in symmetry_proposals(scored, work.pivot, config)]
         twin = twin_proposal(scored, work.pivot, config) if config.twin_rival else None
         extra += [] if twin is None else [(twin, "twin")]
+        neighbours = config.neighbour_rivals if config.correlation_candidates > 0 else 0
         for h in [scored[0], *ambiguous_rivals(scored, work.pivot, config)]:
             near = neighbour_placements(
                 work.w1, work.w2, h.map1_from_map2, work.pivot, config.correlation,
                 radius=config.settle_distance, separation=config.distinct_translation,
-                count=config.neighbour_rivals,
+                count=neighbours,
             )  # fmt: skip
             extra += [(t, "neighbour") for t in near]
         seen = [h.map1_from_map2 for h in scored]
