@@ -426,6 +426,18 @@ def test_a_tight_or_large_overlap_passes(psi: float, overlap_cells: int, resolut
     assert rule_small_overlap_fits_tightly(candidates, CONFIG) is None
 
 
+def test_a_tiny_overlap_is_refused_however_tightly_it_fits() -> None:
+    # 5 m² at psi 0.1 cells: two windows of a symmetric arena lie on each other as tightly
+    candidates = _candidates(_small(psi=0.1, overlap_cells=500))
+    why = rule_small_overlap_fits_tightly(candidates, CONFIG)
+    assert why == "the best transform overlaps only 5.0 m² (< 6.0 m²)"
+    assert _refused_by(candidates) == (
+        "rule_small_overlap_fits_tightly",
+        f"no confident merge: {why}",
+    )
+    assert rule_small_overlap_fits_tightly(candidates, MergeConfig(min_merge_area=4.0)) is None
+
+
 def test_the_small_overlap_rule_reads_its_two_thresholds() -> None:
     candidates = _candidates(_small(psi=0.7))
     assert rule_small_overlap_fits_tightly(candidates, MergeConfig(small_overlap_area=6.0)) is None

@@ -56,6 +56,7 @@ __all__ = [
     "cluster_hypotheses",
     "correlation_hypotheses",
     "generate_hypotheses",
+    "neighbour_placements",
     "placement_scores",
     "pool_hypotheses",
     "relative_pose",
@@ -814,3 +815,45 @@ def correlation_hypotheses(
         Hypothesis(map1_from_map2=transform, weight=value / best, votes=0)
         for value, transform in found[: config.max_hypotheses]
     ]
+
+
+def neighbour_placements(
+    m1: GridMap,
+    m2: GridMap,
+    transform: ArrayLike,
+    pivot: ArrayLike,
+    config: CorrelationConfig | None = None,
+    *,
+    radius: float,
+    separation: float,
+    count: int,
+) -> list[FloatArray]:
+    """The best ``count`` other placements of map 2 near ``transform``: local maxima of the
+    wall correlation (:func:`correlation_hypotheses`) at ``transform``'s rotation, at least
+    ``separation`` apart (m) and putting ``pivot`` (a point of m2, its frame) at least
+    ``separation`` and less than ``radius`` (m) from where ``transform`` puts it; best
+    score first.
+
+    Where a building repeats with a short period (a lattice of pillars, shelf aisles), the
+    placement one period off may fit as well as the truth and overlap more, so it is the
+    one proposed; the truth, with fewer walls in common, lies on the slope of its
+    correlation peak and is suppressed by the default ``min_peak_distance``. Searching the
+    neighbourhood at the finer ``separation`` shows it, and the merge then judges it as a
+    rival.
+    """
+    if count <= 0:
+        return []
+    t = np.asarray(transform, dtype=np.float64)
+    point = np.asarray(pivot, dtype=np.float64).reshape(1, 2)
+    at = transform_points(t, point)[0]
+    search = replace(
+        config or CorrelationConfig(), min_peak_distance=separation, max_hypotheses=10**6
+    )
+    found = []
+    for placement in correlation_hypotheses(m1, m2, search, rotations=[float(t[2])]):
+        apart = float(np.hypot(*(transform_points(placement.map1_from_map2, point)[0] - at)))
+        if separation <= apart < radius:
+            found.append(placement.map1_from_map2)
+            if len(found) >= count:
+                break
+    return found

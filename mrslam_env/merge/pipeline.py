@@ -66,6 +66,7 @@ from mrslam_env.merge.hypotheses import (
     HypothesisSet,
     correlation_hypotheses,
     generate_hypotheses,
+    neighbour_placements,
 )
 from mrslam_env.merge.mcl import MclConfig
 from mrslam_env.merge.refine import RandomWalkConfig, RandomWalkResult, refine_random_walk
@@ -203,6 +204,11 @@ class MergeConfig:
     are not counted) ..."""
     min_overlap_area: float = 3.0
     """... and overlaps on at least this many m²."""
+    min_merge_area: float = 6.0
+    """A best candidate that overlaps less than this (m²) is refused however well it fits
+    (:func:`~mrslam_env.merge.decide.rule_small_overlap_fits_tightly`): a window of a few
+    m² of a symmetric or repeating building fits another part of it as tightly as its own
+    (docs/decisions.md, "A floor under the overlap of a merge")."""
     small_overlap_area: float = 8.0
     """A best candidate that overlaps less than this (m²) ..."""
     small_overlap_max_psi: float = 0.6
@@ -277,6 +283,13 @@ class MergeConfig:
     centre, which lands where the best puts it; :func:`twin_proposal`) is refined and
     judged too, so that a near-symmetric building's twin is always among the rivals
     (docs/decisions.md, "Rival switching")."""
+    neighbour_rivals: int = 2
+    """With a confident best candidate, up to this many placements near it and near each of
+    its rivals (same rotation, m2's known centre moved by ``distinct_translation`` to
+    ``settle_distance``; :func:`~mrslam_env.merge.hypotheses.neighbour_placements`) are
+    refined and judged too, so that the truth one period off a repeating structure is
+    among the rivals (0: off; off too with the correlation off, ``correlation_candidates =
+    0``, the live team's setting; docs/decisions.md, "Neighbour rivals")."""
     settle_walk: RandomWalkConfig = field(default_factory=lambda: _fine_walk(200))
     """The short refinement of each candidate re-judged at the input resolution: the final
     refinement's (``final_random_walk``) with a third of its iterations."""
@@ -312,6 +325,7 @@ class MergeConfig:
             ),
             non_negative=(
                 "hough_sweep",
+                "min_merge_area",
                 "small_overlap_area",
                 "conflict_weight",
                 "contradicted_rival_factor",
@@ -325,6 +339,7 @@ class MergeConfig:
                 "hough_candidates",
                 "symmetry_proposals",
                 "cascade_rivals",
+                "neighbour_rivals",
             ),
         )
         for attr in fractions:
@@ -396,8 +411,9 @@ class ScoredHypothesis:
         correlation, :func:`~mrslam_env.merge.hypotheses.correlation_hypotheses`),
         ``"hough"`` (the same correlation at the Hough spectra's rotations,
         :attr:`MergeConfig.hough_candidates`), ``"symmetry"``
-        (:func:`symmetry_proposals`, the aliasing check) or ``"twin"`` (the best turned
-        by 180° about m2's known centre, :func:`twin_proposal`).
+        (:func:`symmetry_proposals`, the aliasing check), ``"twin"`` (the best turned
+        by 180° about m2's known centre, :func:`twin_proposal`) or ``"neighbour"`` (near
+        the best or a rival, :attr:`MergeConfig.neighbour_rivals`).
     fine_walls : WallMatch or None
         When the candidate was re-judged at the input resolution to settle an ambiguity
         (:attr:`MergeConfig.settle`): its walls against the other map's there, after a
@@ -876,8 +892,9 @@ def _score(
 ) -> tuple[Candidates, list[RandomWalkResult]]:
     """Refine and judge every proposal, refute and rank (:func:`_rank`); when the best is
     then confident, also judge the placements a repeating building would allow
-    (:func:`symmetry_proposals`, the aliasing check) and rank again. Returns the ranked
-    candidates and their random walks, in the same order."""
+    (:func:`symmetry_proposals`, the aliasing check; :func:`twin_proposal`; the
+    neighbours of the best and of its rivals, ``neighbour_rivals``) and rank again.
+    Returns the ranked candidates and their random walks, in the same order."""
     judged = [
         _score_candidate(work, transform, support, votes, source, config, rng, trace)
         for transform, support, votes, source in initials
@@ -887,9 +904,20 @@ def _score(
         scored = [j.hypothesis for j in judged]
         extra = [(t, "symmetry") for t in symmetry_proposals(scored, work.pivot, config)]
         twin = twin_proposal(scored, work.pivot, config) if config.twin_rival else None
-        if twin is not None and not any(same_answer(twin, t, work.pivot, config) for t, _ in extra):
-            extra.append((twin, "twin"))
+        extra += [] if twin is None else [(twin, "twin")]
+        neighbours = config.neighbour_rivals if config.correlation_candidates > 0 else 0
+        for h in [scored[0], *ambiguous_rivals(scored, work.pivot, config)]:
+            near = neighbour_placements(
+                work.w1, work.w2, h.map1_from_map2, work.pivot, config.correlation,
+                radius=config.settle_distance, separation=config.distinct_translation,
+                count=neighbours,
+            )  # fmt: skip
+            extra += [(t, "neighbour") for t in near]
+        seen = [h.map1_from_map2 for h in scored]
         for transform, source in extra:
+            if any(same_answer(transform, k, work.pivot, config) for k in seen):
+                continue
+            seen.append(transform)
             judged.append(_score_candidate(work, transform, 0.0, 0, source, config, rng, trace))
         judged = _rank(judged, work.pivot, config)
     candidates = Candidates(
