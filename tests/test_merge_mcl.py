@@ -88,6 +88,27 @@ def test_low_variance_resample():
     assert abs(counts[1] - 750) <= 1
 
 
+def test_low_variance_resample_is_the_searchsorted_of_the_running_sum():
+    """The numba loop draws once and picks what numpy's cumsum + searchsorted pick,
+    index for index (zero weights, long runs, one heavy particle)."""
+    rng = np.random.default_rng(3)
+    for trial in range(200):
+        n = int(rng.integers(1, 3000))
+        weights = rng.random(n) ** rng.uniform(1.0, 40.0)
+        weights[rng.random(n) < 0.3] = 0.0
+        if not weights.any():
+            weights[0] = 1.0
+        weights /= weights.sum()
+        count = int(rng.integers(1, 2000))
+        ours, numpy_rng = np.random.default_rng(trial), np.random.default_rng(trial)
+        cumulative = np.cumsum(weights)
+        cumulative[-1] = 1.0
+        positions = (numpy_rng.random() + np.arange(count)) / count
+        expected = np.searchsorted(cumulative, positions, side="left")
+        np.testing.assert_array_equal(low_variance_resample(weights, count, ours), expected)
+        assert ours.random() == numpy_rng.random()  # one draw each
+
+
 def test_particle_clusters_find_two_blobs_across_the_heading_wrap():
     rng = np.random.default_rng(2)
     a = np.column_stack(

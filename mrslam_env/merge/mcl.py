@@ -576,10 +576,25 @@ def low_variance_resample(
 ) -> NDArray[np.int64]:
     """Indices (count,) drawn by low-variance (systematic) resampling of normalised weights
     (Thrun et al., Table 4.4)."""
+    weights = np.ascontiguousarray(weights, dtype=np.float64)
+    return _low_variance_indices(weights, count, rng.random())
+
+
+@numba.njit(cache=True)
+def _low_variance_indices(weights: FloatArray, count: int, start: float) -> NDArray[np.int64]:
+    """The loop of :func:`low_variance_resample`, with numpy's float operations: the
+    running sum (the last set to 1), the positions ``(start + k) / count`` and for each
+    the first index whose running sum reaches it (``searchsorted``, side left)."""
     cumulative = np.cumsum(weights)
     cumulative[-1] = 1.0
-    positions = (rng.random() + np.arange(count)) / count
-    return np.searchsorted(cumulative, positions, side="left").astype(np.int64)
+    out = np.empty(count, dtype=np.int64)
+    index = 0
+    for k in range(count):
+        position = (start + k) / count
+        while cumulative[index] < position:
+            index += 1
+        out[k] = index
+    return out
 
 
 def particle_clusters(
