@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from merge_fixtures import map_pair
 
-from mrslam_env.geometry import wrap_angle
+from mrslam_env.geometry import mean_pose, wrap_angle
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.merge.mcl import (
     MclConfig,
@@ -86,6 +86,87 @@ def test_low_variance_resample():
     assert sorted(uniform.tolist()) == [0, 1, 2, 3, 4]
     counts = np.bincount(low_variance_resample(np.array([0.25, 0.75]), 1000, rng), minlength=2)
     assert abs(counts[1] - 750) <= 1
+
+
+def test_low_variance_resample_is_the_searchsorted_of_the_running_sum():
+    """The numba loop draws once and picks what numpy's cumsum + searchsorted pick,
+    index for index (zero weights, long runs, one heavy particle)."""
+    rng = np.random.default_rng(3)
+    for trial in range(200):
+        n = int(rng.integers(1, 3000))
+        weights = rng.random(n) ** rng.uniform(1.0, 40.0)
+        weights[rng.random(n) < 0.3] = 0.0
+        if not weights.any():
+            weights[0] = 1.0
+        weights /= weights.sum()
+        count = int(rng.integers(1, 2000))
+        ours, numpy_rng = np.random.default_rng(trial), np.random.default_rng(trial)
+        cumulative = np.cumsum(weights)
+        cumulative[-1] = 1.0
+        positions = (numpy_rng.random() + np.arange(count)) / count
+        expected = np.searchsorted(cumulative, positions, side="left")
+        np.testing.assert_array_equal(low_variance_resample(weights, count, ours), expected)
+        assert ours.random() == numpy_rng.random()  # one draw each
+
+
+def _numpy_clusters(particles, weights, radius, angle, max_clusters, min_weight):
+    """The greedy mean shift of particle_clusters' docstring in numpy (geometry.mean_pose):
+    the reference the numba loop must follow up to the order of its sums."""
+    weights = weights / weights.sum()
+    remaining = np.ones(len(particles), dtype=bool)
+    bins = np.column_stack(
+        [
+            np.floor(particles[:, 0] / radius),
+            np.floor(particles[:, 1] / radius),
+            np.floor((particles[:, 2] + np.pi) / angle),
+        ]
+    ).astype(np.int64)
+    key = np.unique(bins, axis=0, return_inverse=True)[1].ravel()
+    found = []
+    while len(found) < max_clusters:
+        left = float(weights[remaining].sum())
+        if left <= 0 or left < min_weight:
+            break
+        heaviest = np.argmax(np.bincount(key[remaining], weights[remaining], key.max() + 1))
+        members = remaining & (key == heaviest)
+        centre = mean_pose(particles[members], weights[members])
+        for _ in range(3):
+            offsets = particles[:, :2] - centre[:2]
+            turns = np.abs(wrap_angle(particles[:, 2] - centre[2]))
+            near = remaining & ((offsets**2).sum(axis=1) <= radius**2) & (turns <= angle)
+            if not near.any():
+                break
+            members = near
+            centre = mean_pose(particles[members], weights[members])
+        remaining &= ~members
+        if weights[members].sum() < min_weight:
+            break
+        found.append((centre, float(weights[members].sum()), int(members.sum())))
+    return sorted(found, key=lambda cluster: -cluster[1])
+
+
+def test_particle_clusters_follow_the_numpy_mean_shift():
+    """Blobs, uniform clutter and a heavy tail of weights: the same clusters (members
+    counted exactly), poses and weights equal up to the order of the sums."""
+    rng = np.random.default_rng(7)
+    for trial in range(60):
+        n = 20000 if trial % 6 == 0 else 1500
+        k = int(rng.integers(1, 8))
+        centres = np.column_stack([rng.uniform(-10, 10, (k, 2)), rng.uniform(-np.pi, np.pi, k)])
+        particles = centres[rng.integers(0, k, n)]
+        particles = particles + rng.normal(size=(n, 3)) * [0.3, 0.3, 0.2] * rng.uniform(0.2, 3)
+        if trial % 3 == 0:  # half of them scattered over the whole map
+            particles[n // 2 :, :2] = rng.uniform(-10, 10, (n - n // 2, 2))
+        particles[:, 2] = wrap_angle(particles[:, 2])
+        weights = np.exp(rng.normal(size=n) * rng.uniform(0, 10))
+        ours = particle_clusters(
+            particles, weights, radius=0.5, angle=0.3, max_clusters=5, min_weight=0.03
+        )
+        expected = _numpy_clusters(particles, weights, 0.5, 0.3, 5, 0.03)
+        assert [c.count for c in ours] == [count for _, _, count in expected]
+        for cluster, (pose, weight, _) in zip(ours, expected, strict=True):
+            np.testing.assert_allclose(cluster.pose, pose, rtol=0, atol=1e-12)
+            assert cluster.weight == pytest.approx(weight, abs=1e-12)
 
 
 def test_particle_clusters_find_two_blobs_across_the_heading_wrap():

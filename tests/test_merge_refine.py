@@ -15,13 +15,17 @@ import numpy as np
 import pytest
 from merge_fixtures import map_pair
 
-from mrslam_env.geometry import inverse, wrap_angle
+from mrslam_env.geometry import inverse, wrap_angle, wrap_scalar
 from mrslam_env.gridmap import GridMap
 from mrslam_env.merge.dissimilarity import DissimilarityConfig, dissimilarity, distance_maps
 from mrslam_env.merge.fuse import warp_map
 from mrslam_env.merge.refine import (
     MIN_MOVES_TO_ADAPT,
     RandomWalkConfig,
+    _from_pivot_parameters,
+    _pivot,
+    _to_pivot_parameters,
+    _wrap,
     adapted_proposal,
     refine_random_walk,
 )
@@ -137,6 +141,82 @@ def test_seeded_walk_is_deterministic(office_pair) -> None:
     np.testing.assert_array_equal(runs[0].transform, runs[1].transform)
     np.testing.assert_array_equal(runs[0].trace.candidates, runs[1].trace.candidates)
     assert not np.array_equal(runs[0].trace.candidates, runs[2].trace.candidates)
+
+
+def _python_walk(m1, m2, start, config, rng, d1, d2):
+    """The walk of refine_random_walk's docstring as a plain numpy loop (psi from
+    :func:`dissimilarity`): the oracle the numba kernel must follow bit for bit."""
+    cost = config.dissimilarity
+
+    def psi_of(transform):
+        return dissimilarity(m1, m2, transform, distances1=d1, distances2=d2, config=cost)
+
+    pivot = _pivot(m2, d2)
+    current_psi = best_psi = psi_of(start)
+    current = _to_pivot_parameters(start, pivot)
+    best, best_transform = current.copy(), start.copy()
+    moves: list[np.ndarray] = []
+    fallback, rejections, taken = 1.0, 0, 0
+    proposal = None
+    for _ in range(config.iterations):
+        if proposal is None:
+            proposal = adapted_proposal(np.asarray(moves).reshape(-1, 3), config, fallback)
+        mean, cholesky = proposal
+        move = mean + cholesky @ rng.standard_normal(3)
+        worse_ok = rng.random() < config.worse_move_probability
+        candidate = current + move
+        candidate[2] = wrap_scalar(candidate[2])
+        transform = _from_pivot_parameters(candidate, pivot)
+        psi = psi_of(transform)
+        if math.isfinite(psi) and (psi <= current_psi or worse_ok):
+            moves = [*moves, move][-config.memory :]
+            proposal, taken, rejections = None, taken + 1, 0
+            current, current_psi = candidate, psi
+            if psi < best_psi:
+                best, best_psi, best_transform = candidate.copy(), psi, transform
+        else:
+            rejections += 1
+            if rejections >= config.stall_iterations:
+                moves, proposal, rejections = [], None, 0
+                fallback *= 0.5
+                current, current_psi = best.copy(), best_psi
+    return best_transform, best_psi, taken
+
+
+@pytest.mark.parametrize(
+    "cost",
+    [
+        DissimilarityConfig(),
+        DissimilarityConfig(wall_sides=True),
+        DissimilarityConfig(restrict_to_overlap=False),
+        DissimilarityConfig(restrict_to_overlap=False, wall_sides=True),
+    ],
+    ids=["overlap", "wall-sides", "faithful", "faithful-wall-sides"],
+)
+def test_kernel_walk_is_the_numpy_walk_bit_for_bit(office_pair, cost) -> None:
+    """The numba kernel draws the same numbers and computes the same psi as the numpy
+    loop, so every transform and psi is equal, not close, for every psi variant."""
+    m1, m2 = office_pair
+    d1, d2 = distance_maps(m1, sides=True), distance_maps(m2, sides=True)
+    config = RandomWalkConfig(iterations=150, stall_iterations=10, dissimilarity=cost)
+    for seed in range(3):
+        start = perturbed(OFFICE_TRUTH, np.random.default_rng(seed), 0.3, 5.0)
+        ours, numpy_rng = np.random.default_rng(seed), np.random.default_rng(seed)
+        result = refine_random_walk(
+            m1, m2, start, config=config, rng=ours, distances1=d1, distances2=d2
+        )
+        transform, psi, taken = _python_walk(m1, m2, start, config, numpy_rng, d1, d2)
+        np.testing.assert_array_equal(result.transform, transform)
+        assert result.psi == psi and result.accepted_moves == taken
+        assert ours.random() == numpy_rng.random()  # the generator is left where numpy's is
+
+
+def test_kernel_wrap_is_wrap_scalar() -> None:
+    angles = [0.0, -0.0, math.pi, -math.pi, 3 * math.pi, -3 * math.pi, 2 * math.pi, 1e-300]
+    angles += list(np.random.default_rng(0).uniform(-40.0, 40.0, 2000))
+    angles += [k * math.pi / 2 + d for k in range(-9, 10) for d in (0.0, 1e-15, -1e-15)]
+    for angle in angles:
+        assert _wrap(angle) == wrap_scalar(angle), angle
 
 
 def test_precomputed_distance_maps_do_not_change_the_walk(office_pair) -> None:

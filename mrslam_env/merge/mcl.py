@@ -37,7 +37,6 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from mrslam_env.geometry import mean_pose, wrap_angle
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
 from mrslam_env.merge.skeleton import SkeletonConfig, SkeletonGraph, free_space_graph
 from mrslam_env.merge.virtual import VirtualRun
@@ -576,10 +575,25 @@ def low_variance_resample(
 ) -> NDArray[np.int64]:
     """Indices (count,) drawn by low-variance (systematic) resampling of normalised weights
     (Thrun et al., Table 4.4)."""
+    weights = np.ascontiguousarray(weights, dtype=np.float64)
+    return _low_variance_indices(weights, count, rng.random())
+
+
+@numba.njit(cache=True)
+def _low_variance_indices(weights: FloatArray, count: int, start: float) -> NDArray[np.int64]:
+    """The loop of :func:`low_variance_resample`, with numpy's float operations: the
+    running sum (the last set to 1), the positions ``(start + k) / count`` and for each
+    the first index whose running sum reaches it (``searchsorted``, side left)."""
     cumulative = np.cumsum(weights)
     cumulative[-1] = 1.0
-    positions = (rng.random() + np.arange(count)) / count
-    return np.searchsorted(cumulative, positions, side="left").astype(np.int64)
+    out = np.empty(count, dtype=np.int64)
+    index = 0
+    for k in range(count):
+        position = (start + k) / count
+        while cumulative[index] < position:
+            index += 1
+        out[k] = index
+    return out
 
 
 def particle_clusters(
@@ -603,13 +617,12 @@ def particle_clusters(
     list of ParticleCluster
         Heaviest first; weights are fractions of the total weight.
     """
-    particles = np.asarray(particles, dtype=np.float64)
+    particles = np.ascontiguousarray(particles, dtype=np.float64)
     weights = np.asarray(weights, dtype=np.float64)
     total = float(weights.sum())
     if len(particles) == 0 or total <= 0:
         return []
-    weights = weights / total
-    remaining = np.ones(len(particles), dtype=bool)
+    weights = np.ascontiguousarray(weights / total)
     bins = np.column_stack(
         [
             np.floor(particles[:, 0] / radius),
@@ -621,33 +634,13 @@ def particle_clusters(
     span = bins.max(axis=0) + 1
     key = (bins[:, 0] * span[1] + bins[:, 1]) * span[2] + bins[:, 2]
     bin_index = _ranks(key, int(span[0] * span[1] * span[2]))
-    clusters: list[ParticleCluster] = []
-    while len(clusters) < max_clusters:
-        left = float(weights[remaining].sum())
-        if left <= 0 or left < min_weight:
-            break
-        seed_members = _heaviest_bin_members(bin_index, weights, remaining)
-        centre = mean_pose(particles[seed_members], weights[seed_members])
-        members = seed_members
-        for _ in range(3):
-            near = _within(particles, centre, radius, angle, remaining)
-            if not near.any():
-                break
-            members = near
-            centre = mean_pose(particles[members], weights[members])
-        w = weights[members]
-        offsets = particles[members, :2] - centre[:2]
-        turns = wrap_angle(particles[members, 2] - centre[2])
-        spread = np.array(
-            [
-                math.sqrt(float(w @ (offsets**2).sum(axis=1)) / float(w.sum())),
-                math.sqrt(float(w @ turns**2) / float(w.sum())),
-            ]
-        )
-        remaining &= ~members
-        if float(w.sum()) < min_weight:
-            break  # seeds come heaviest bin first: what is left is scattered
-        clusters.append(ParticleCluster(centre, float(w.sum()), int(members.sum()), spread))
+    poses, found = _cluster_loop(
+        particles, weights, bin_index, radius, angle, max_clusters, min_weight
+    )
+    clusters = [
+        ParticleCluster(poses[k].copy(), float(w), int(n), np.array([xy, turn]))
+        for k, (w, n, xy, turn) in enumerate(found)
+    ]
     clusters.sort(key=lambda cluster: -cluster.weight)
     return clusters
 
@@ -703,6 +696,83 @@ def _within(
         angle,
         np.ones(len(particles), dtype=np.bool_) if among is None else among,
     )
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _weighted_mean_pose(
+    particles: FloatArray, weights: FloatArray, members: NDArray[np.bool_]
+) -> tuple[float, float, float]:
+    """:func:`~mrslam_env.geometry.mean_pose` of the members (weights normalised over
+    them first; headings by their unit vectors), summed in index order."""
+    total = 0.0
+    for i in range(particles.shape[0]):
+        if members[i]:
+            total += weights[i]
+    x = y = sin_sum = cos_sum = 0.0
+    for i in range(particles.shape[0]):
+        if members[i]:
+            w = weights[i] / total
+            x += w * particles[i, 0]
+            y += w * particles[i, 1]
+            sin_sum += w * math.sin(particles[i, 2])
+            cos_sum += w * math.cos(particles[i, 2])
+    return x, y, math.atan2(sin_sum, cos_sum)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _cluster_loop(
+    particles: FloatArray,
+    weights: FloatArray,
+    bin_index: NDArray[np.int64],
+    radius: float,
+    angle: float,
+    max_clusters: int,
+    min_weight: float,
+) -> tuple[FloatArray, FloatArray]:
+    """The greedy mean shift of :func:`particle_clusters` on normalised weights: the
+    clusters' poses (K, 3) and their weight, particle count and spreads (K, 4), in the
+    order found."""
+    n = particles.shape[0]
+    remaining = np.ones(n, dtype=np.bool_)
+    poses = np.empty((max_clusters, 3))
+    found = np.empty((max_clusters, 4))
+    count = 0
+    while count < max_clusters:
+        left = 0.0
+        for i in range(n):
+            if remaining[i]:
+                left += weights[i]
+        if left <= 0 or left < min_weight:
+            break
+        members = _heaviest_bin_members(bin_index, weights, remaining)
+        x, y, theta = _weighted_mean_pose(particles, weights, members)
+        for _ in range(3):
+            near = _within_kernel(particles, x, y, theta, radius * radius, angle, remaining)
+            if not near.any():
+                break
+            members = near
+            x, y, theta = _weighted_mean_pose(particles, weights, members)
+        total = 0.0
+        size = 0
+        offset_sum = 0.0
+        turn_sum = 0.0
+        for i in range(n):
+            if members[i]:
+                dx, dy = particles[i, 0] - x, particles[i, 1] - y
+                turn = _wrap(particles[i, 2] - theta)
+                total += weights[i]
+                size += 1
+                offset_sum += weights[i] * (dx * dx + dy * dy)
+                turn_sum += weights[i] * turn * turn
+                remaining[i] = False
+        if total < min_weight:
+            break  # seeds come heaviest bin first: what is left is scattered
+        poses[count, 0], poses[count, 1], poses[count, 2] = x, y, theta
+        found[count, 0], found[count, 1] = total, size
+        found[count, 2] = math.sqrt(offset_sum / total)
+        found[count, 3] = math.sqrt(turn_sum / total)
+        count += 1
+    return poses[:count], found[:count]
 
 
 _DENSE_KEYS = 4_000_000
