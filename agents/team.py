@@ -96,6 +96,7 @@ __all__ = [
     "TeamCoordinator",
     "TeamState",
     "distinct_hypotheses",
+    "heading_allowance",
     "in_plain_sight",
     "radio_contradiction",
     "window",
@@ -144,8 +145,17 @@ class TeamConfig:
     than ``comm_range`` plus this margin (m) apart on a step the link was up, or (with
     ``comm_exact``) closer than ``comm_range`` less the margin on a step it was down, is
     rejected without a rendezvous, on the robots' whole tracks when it is formed and
-    on every step while it is tested. The margin covers the error of a true hypothesis
-    at the robots and the SLAM poses' (None: the radio is not used)."""
+    on every step while it is tested. The margin covers a true hypothesis' position
+    error and the SLAM poses' (None: the radio is not used); its heading error is
+    ``radio_heading_tolerance``'s."""
+    radio_heading_tolerance: float = math.radians(1.0)
+    """The heading error (rad) a true hypothesis may have in the radio check: it moves the
+    partner's predicted place by up to its tangent times the partner's distance from the
+    place the hypothesis is pinned (where the maps overlap: within the partner's track,
+    taken at its bounding box's farthest corner). Where that reach exceeds
+    ``radio_margin`` it is the margin instead. 1°: the final-error bound (a hypothesis
+    further off is wrong); with the margin alone a true hypothesis 1° off would be
+    rejected for good once the partner is 57 m from the pivot."""
     interaction: bool = True
     """False: the robots never interact (the independent-exploration baseline)."""
     keep_merges: bool = False
@@ -256,7 +266,7 @@ class TeamConfig:
         if self.undecided_wait is not None:
             check_fields(self, whole=("undecided_wait",))
         if self.radio_margin is not None:
-            check_fields(self, non_negative=("radio_margin",))
+            check_fields(self, non_negative=("radio_margin", "radio_heading_tolerance"))
         margin, peer_range = self.sight_margin, self.peer_range
         require(name, "sight_margin", margin, margin < peer_range, f"< peer_range ({peer_range})")
 
@@ -407,21 +417,37 @@ def radio_contradiction(
     *,
     comm_range: float,
     exact: bool,
+    allowance: ArrayLike = 0.0,
 ) -> float:
     """How far (m) ``hypothesis`` (``side0_from_side1``) puts two robots outside what
     their radio link said, at worst over the steps given: on a step the link was up, the
     amount by which the robots' distance under the hypothesis exceeds ``comm_range``; on
     one it was down (only if the link is up ``exact``-ly within ``comm_range``), the
-    amount by which it falls short of it. ``track0`` (T, 2) and ``track1`` (T, 2) are the
-    robots' positions in their side's frame on those steps, ``link`` (T,) whether the
-    link was up. Negative (or -inf for no step) when the hypothesis agrees with the
-    radio."""
+    amount by which it falls short of it; less the step's ``allowance`` (m, scalar or
+    (T,): the error a true hypothesis may have there). ``track0`` (T, 2) and ``track1``
+    (T, 2) are the robots' positions in their side's frame on those steps, ``link`` (T,)
+    whether the link was up. Negative (or -inf for no step) when the hypothesis agrees
+    with the radio."""
     if len(link) == 0:
         return -math.inf
     predicted = transform_points(hypothesis, np.asarray(track1, dtype=np.float64))
     distance = np.hypot(*(predicted - np.asarray(track0, dtype=np.float64)).T)
     down = comm_range - distance if exact else np.full_like(distance, -math.inf)
-    return float(np.where(link, distance - comm_range, down).max())
+    return float((np.where(link, distance - comm_range, down) - allowance).max())
+
+
+def heading_allowance(track: FloatArray, known: FloatArray, tolerance: float) -> FloatArray:
+    """(T,) m: how far a heading error of ``tolerance`` (rad) moves each place of
+    ``track`` (T, 2) about a pivot anywhere in the box bounding ``known`` (K, 2; the
+    robot's whole track, where the maps that pin the hypothesis were made): the tangent
+    times the distance to the box's farthest corner."""
+    track = np.asarray(track, dtype=np.float64).reshape(-1, 2)
+    known = np.asarray(known, dtype=np.float64).reshape(-1, 2)
+    if len(known) == 0 or len(track) == 0:
+        return np.zeros(len(track))
+    low, high = known.min(axis=0), known.max(axis=0)
+    reach = np.maximum(np.abs(track - low), np.abs(track - high))
+    return math.tan(tolerance) * np.hypot(*reach.T)
 
 
 def _either_in_sight(
@@ -1178,26 +1204,31 @@ class TeamCoordinator:
         """:func:`radio_contradiction` of ``hypothesis`` (the current pair's) on the pair's
         tracks, each position in its group root's frame, from step ``since`` (an index into
         the tracks) to the last step the pair's link was up: a robot's positions reach its
-        partner only over the link, so the steps it was down are judged when it is back."""
+        partner only over the link, so the steps it was down are judged when it is back.
+        Each step is allowed the heading tolerance's reach at the partner
+        (:func:`heading_allowance`) where it exceeds ``radio_margin``
+        (:attr:`TeamConfig.radio_heading_tolerance`)."""
         a, b = self.pair
         end = len(self._link_track)
         while end > since and not self._link_track[end - 1][a, b]:
             end -= 1
-        steps = slice(since, end)
         tracks = []
         for robot in (a, b):
-            track = np.asarray(self._tracks[robot][steps], dtype=np.float64).reshape(-1, 2)
+            track = np.asarray(self._tracks[robot][:end], dtype=np.float64).reshape(-1, 2)
             if self.roots[robot] != robot:
                 track = transform_points(self.frames[robot], track)
             tracks.append(track)
-        link = np.array([links[a, b] for links in self._link_track[steps]], dtype=bool)
+        link = np.array([links[a, b] for links in self._link_track[since:end]], dtype=bool)
+        judged = tracks[1][since:end]
+        reach = heading_allowance(judged, tracks[1], self.config.radio_heading_tolerance)
         return radio_contradiction(
             hypothesis,
-            tracks[0],
-            tracks[1],
+            tracks[0][since:end],
+            judged,
             link,
             comm_range=self.config.comm_range,
             exact=self.config.comm_exact,
+            allowance=np.maximum(reach - (self.config.radio_margin or 0.0), 0.0),
         )
 
     def _radio_refutes(self, hypothesis: FloatArray, *, since: int = 0) -> str | None:

@@ -16,6 +16,7 @@ from agents.team import (
     TeamState,
     _Rendezvous,
     distinct_hypotheses,
+    heading_allowance,
     in_plain_sight,
     radio_contradiction,
     window,
@@ -748,6 +749,32 @@ def test_the_radio_contradicts_a_placement_the_link_rules_out() -> None:
     inexact = {"comm_range": 12.0, "exact": False}
     assert radio_contradiction(truth, track0, track1, down, **inexact) == -np.inf
     assert radio_contradiction(truth, track0[:0], track1[:0], up[:0], **kwargs) == -np.inf
+
+
+def test_the_radio_allows_a_true_hypothesis_its_heading_error_far_from_the_pivot() -> None:
+    # Robot 1 drove 100 m along a corridor from where the maps pin the hypothesis (its
+    # start); robot 0 stands 11.9 m to the side of its end, the link up. A placement 1°
+    # off about the start puts robot 1 1.75 m off at the end: 13.6 m from robot 0,
+    # beyond the 1 m margin, though within the final-error bound.
+    along = np.linspace(0.0, 100.0, 51)
+    track1 = np.stack([along, np.zeros_like(along)], axis=1)
+    track0 = track1 + np.array([0.0, -11.9])
+    up = np.ones(len(along), dtype=bool)
+    kwargs = {"comm_range": 12.0, "exact": True}
+    one_degree_off = np.array([0.0, 0.0, np.radians(1.0)])
+    assert radio_contradiction(one_degree_off, track0, track1, up, **kwargs) > 1.0
+    reach = heading_allowance(track1, track1, np.radians(1.0))
+    assert reach[0] == pytest.approx(np.tan(np.radians(1.0)) * 100.0)  # the far corner
+    assert reach[-1] == pytest.approx(np.tan(np.radians(1.0)) * 100.0)
+    assert reach[25] == pytest.approx(np.tan(np.radians(1.0)) * 50.0)
+    # The team allows the reach where it exceeds the margin (1 m: beyond 57 m).
+    allowance = np.maximum(reach - 1.0, 0.0)
+    assert (allowance[reach < 1.0] == 0.0).all() and allowance[-1] > 0.7
+    excess = radio_contradiction(one_degree_off, track0, track1, up, **kwargs, allowance=allowance)
+    assert excess <= 1.0
+    # A placement 3 m off is still ruled out at the end of the corridor.
+    three_m_off = np.array([0.0, 3.0, 0.0])
+    assert radio_contradiction(three_m_off, track0, track1, up, **kwargs, allowance=allowance) > 1.0
 
 
 def test_the_team_takes_the_radios_figures_from_the_env() -> None:
