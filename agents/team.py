@@ -267,6 +267,9 @@ class TeamConfig:
             check_fields(self, whole=("undecided_wait",))
         if self.radio_margin is not None:
             check_fields(self, non_negative=("radio_margin", "radio_heading_tolerance"))
+            tolerance = self.radio_heading_tolerance
+            ok = tolerance < math.pi / 2  # its tangent sets the reach
+            require(name, "radio_heading_tolerance", tolerance, ok, "< pi/2 (radians)")
         margin, peer_range = self.sight_margin, self.peer_range
         require(name, "sight_margin", margin, margin < peer_range, f"< peer_range ({peer_range})")
 
@@ -1241,7 +1244,10 @@ class TeamCoordinator:
         if excess <= margin:
             return None
         self.radio_rejections += 1
-        return f"the radio: it puts the robots {excess:.1f} m beyond what the link said"
+        return (
+            f"the radio: it puts the robots {excess:.1f} m beyond what the link said "
+            "and the error it allows"
+        )
 
     def _radio_rejects(self, hypothesis: FloatArray, kind: str, *, since: int = 0) -> bool:
         """Whether the radio rejects ``hypothesis`` (:meth:`_radio_refutes`); a rejected

@@ -3,6 +3,7 @@ a wrong one; without interaction nothing is merged."""
 
 from __future__ import annotations
 
+import math
 from types import SimpleNamespace
 from typing import Any
 
@@ -103,6 +104,8 @@ def test_bad_team_config_is_refused() -> None:
         TeamConfig(regrow_factor=0.5)
     with pytest.raises(ValueError, match="max_rendezvous"):
         TeamConfig(max_rendezvous=0)
+    with pytest.raises(ValueError, match="radio_heading_tolerance"):
+        TeamConfig(radio_heading_tolerance=math.pi / 2)  # its tangent would be meaningless
 
 
 def _in_sight_team(

@@ -162,7 +162,10 @@ def _python_walk(m1, m2, start, config, rng, d1, d2):
         if proposal is None:
             proposal = adapted_proposal(np.asarray(moves).reshape(-1, 3), config, fallback)
         mean, cholesky = proposal
-        move = mean + cholesky @ rng.standard_normal(3)
+        normal = rng.standard_normal(3)
+        move = mean + (
+            cholesky[:, 0] * normal[0] + cholesky[:, 1] * normal[1] + cholesky[:, 2] * normal[2]
+        )
         worse_ok = rng.random() < config.worse_move_probability
         candidate = current + move
         candidate[2] = wrap_scalar(candidate[2])

@@ -829,10 +829,11 @@ def neighbour_placements(
     count: int,
 ) -> list[FloatArray]:
     """The best ``count`` other placements of map 2 near ``transform``: local maxima of the
-    wall correlation (:func:`correlation_hypotheses`) at ``transform``'s rotation, at least
-    ``separation`` apart (m) and putting ``pivot`` (a point of m2, its frame) at least
-    ``separation`` and less than ``radius`` (m) from where ``transform`` puts it; best
-    score first.
+    wall correlation (:func:`correlation_hypotheses`) at ``transform``'s rotation, about
+    ``separation`` apart (m; the local-maximum window is ``separation`` rounded to the
+    correlation's cells: 0.4 m for 0.5 m at 0.2 m cells) and putting ``pivot`` (a point
+    of m2, its frame) at least ``separation`` and less than ``radius`` (m) from where
+    ``transform`` puts it; best score first.
 
     Where a building repeats with a short period (a lattice of pillars, shelf aisles), the
     placement one period off may fit as well as the truth and overlap more, so it is the

@@ -576,6 +576,8 @@ def low_variance_resample(
     """Indices (count,) drawn by low-variance (systematic) resampling of normalised weights
     (Thrun et al., Table 4.4)."""
     weights = np.ascontiguousarray(weights, dtype=np.float64)
+    if weights.size == 0:  # the kernel reads weights[-1] without bounds checks
+        raise ValueError("low_variance_resample: no weights to resample from")
     return _low_variance_indices(weights, count, rng.random())
 
 

@@ -582,10 +582,14 @@ def _walk_until_adapted(
     (current, best) and ``counters`` (rejections in a row, accepted moves) are updated in
     place."""
     normal = np.empty(3)
+    step = np.empty(3)
     while k < n:
         for j in range(3):
             normal[j] = rng.standard_normal()
-        step = mean + np.dot(cholesky, normal)
+        for i in range(3):  # written out, not BLAS: the same float on every machine
+            step[i] = mean[i] + (
+                cholesky[i, 0] * normal[0] + cholesky[i, 1] * normal[1] + cholesky[i, 2] * normal[2]
+            )
         worse_ok = rng.random() < worse_move_probability
         candidate = current + step
         candidate[2] = _wrap(candidate[2])
