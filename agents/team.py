@@ -1245,8 +1245,8 @@ class TeamCoordinator:
             return None
         self.radio_rejections += 1
         return (
-            f"the radio: it puts the robots {excess:.1f} m beyond what the link said "
-            "and the error it allows"
+            f"the radio: it puts the robots {excess:.1f} m beyond what the link said, past "
+            f"the heading tolerance's reach (> the {margin} m margin)"
         )
 
     def _radio_rejects(self, hypothesis: FloatArray, kind: str, *, since: int = 0) -> bool:

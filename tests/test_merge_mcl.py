@@ -261,7 +261,7 @@ def test_numba_wrap_and_cluster_window_match_numpy_bit_for_bit():
     :func:`~mrslam_env.geometry.wrap_angle` does, so the filter draws the same particles."""
     import numba
 
-    from mrslam_env.merge.mcl import _within, _wrap
+    from mrslam_env.merge.mcl import _within_kernel, _wrap
 
     @numba.njit
     def _wrap_angles(angles: np.ndarray) -> np.ndarray:
@@ -288,7 +288,9 @@ def test_numba_wrap_and_cluster_window_match_numpy_bit_for_bit():
         expected = (dx * dx + dy * dy <= 0.5 * 0.5) & (
             np.abs(wrap_angle(particles[:, 2] - centre[2])) <= 0.3
         )
-        assert np.array_equal(_within(particles, centre, 0.5, 0.3), expected)
+        among = np.ones(len(particles), dtype=np.bool_)
+        within = _within_kernel(particles, *centre, 0.5 * 0.5, 0.3, among)
+        assert np.array_equal(within, expected)
 
 
 def test_numba_motion_update_and_cluster_seeds_match_numpy_bit_for_bit():

@@ -667,6 +667,8 @@ def _within_kernel(
     angle: float,
     among: NDArray[np.bool_],
 ) -> NDArray[np.bool_]:
+    """The particles of ``among`` within ``sqrt(radius_squared)`` (x, y) and ``angle``
+    (heading) of the centre."""
     out = np.empty(particles.shape[0], dtype=np.bool_)
     for i in range(particles.shape[0]):
         dx = particles[i, 0] - centre_x
@@ -677,27 +679,6 @@ def _within_kernel(
             and (abs(_wrap(particles[i, 2] - centre_theta)) <= angle)
         )
     return out
-
-
-def _within(
-    particles: FloatArray,
-    centre: FloatArray,
-    radius: float,
-    angle: float,
-    among: NDArray[np.bool_] | None = None,
-) -> NDArray[np.bool_]:
-    """Particles within ``radius`` (x, y) and ``angle`` (heading) of ``centre`` (only
-    those of ``among``, when given)."""
-    particles = np.ascontiguousarray(particles, dtype=np.float64)
-    return _within_kernel(
-        particles,
-        float(centre[0]),
-        float(centre[1]),
-        float(centre[2]),
-        radius * radius,
-        angle,
-        np.ones(len(particles), dtype=np.bool_) if among is None else among,
-    )
 
 
 @numba.njit(cache=True, error_model="numpy")

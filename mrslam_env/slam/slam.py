@@ -38,6 +38,7 @@ Per update (``mode="slam"``):
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -108,7 +109,9 @@ class RobotSlam:
         # With a lag, the map is never matched against: it needs no likelihood fields.
         self.grid = OccupancyGrid(self.config.grid, fields=lag == 0)
         self._matched_grid = OccupancyGrid(self.config.grid) if lag > 0 else self.grid
-        self._waiting: list[tuple[tuple[float, float, float], FloatArray, FloatArray | None]] = []
+        # (pose, scan, normals) of the scans the matched map has yet to take, oldest first
+        self._waiting: deque[tuple[tuple[float, float, float], FloatArray, FloatArray | None]]
+        self._waiting = deque()
         self._pose = (0.0, 0.0, 0.0)
         self._reference_pose: tuple[float, float, float] | None = None
         self._reference_odom = (0.0, 0.0, 0.0)
@@ -258,7 +261,7 @@ class RobotSlam:
     def _catch_up(self, lag: int) -> None:
         """Integrate into the matched map the waiting scans but the last ``lag``."""
         while len(self._waiting) > lag:
-            pose, scan, normals = self._waiting.pop(0)
+            pose, scan, normals = self._waiting.popleft()
             self._matched_grid.integrate_scan(pose, scan, self.max_range, normals)
 
     def _record(self, pose: tuple[float, float, float]) -> FloatArray:
