@@ -927,8 +927,23 @@ class ExplorerPolicy:
             return
         if self._given_goal is not None:
             self._plan_to_given_goal(cost_grid, distances)
-        else:
-            self._plan_to_frontier(grid, cost_grid, start, reachable, pose, plain)
+            return
+        empty_replans = self._empty_replans
+        self._plan_to_frontier(grid, cost_grid, start, reachable, pose, plain)
+        if self._target is not None or self.status == "waiting" or plain is None or plain is grid:
+            return
+        # Only the map ends exploration: teammates and remembered close returns shape the
+        # paths, but a frontier they cut off (a teammate in the doorway, a jamb's close
+        # returns closing a narrow door) is still to be explored. Plan on the map itself;
+        # the follower's scan guard keeps the robot off what the map does not show.
+        self._empty_replans = empty_replans
+        try:
+            cost_grid = inflate(plain, config.planner)
+            start, reachable = reachable_cells(cost_grid, pose, snap_distance=config.start_snap)
+        except ValueError:
+            self._empty_replans += 1
+            return
+        self._plan_to_frontier(plain, cost_grid, start, reachable, pose, plain)
 
     def _follow(self, cost_grid: CostGrid, cells: IntArray, same_goal: bool = False) -> None:
         path = cost_grid.cell_to_world(shorten_path(cost_grid, cells))

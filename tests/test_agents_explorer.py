@@ -436,6 +436,29 @@ def test_a_teammate_is_planned_around() -> None:
     assert np.abs(policy.plan[:, 1] - 4.0).max() < 0.05  # without it, straight through
 
 
+def test_a_teammate_in_the_doorway_does_not_end_exploration() -> None:
+    # The only frontier left (the east doorway) lies beyond the inner door, where the
+    # teammate stands. Regression (planner_test seed 2, team): after the rendezvous both
+    # robots found no frontier on the map with each other's footprints and close returns
+    # marked, reported done and ended the run at 75 % coverage. Only the map ends
+    # exploration: the robot plans to the doorway through the teammate's place.
+    grid = two_rooms()
+    grid.cells[40:60, 20] = OCCUPIED  # close the west doorway
+    policy = ExplorerPolicy(np.random.default_rng(0))
+    policy.set_teammates(np.array([[4.0, 2.5]]))  # in the inner door
+    for _ in range(policy.config.done_after + 1):
+        policy.act({"pose": np.array([2.0, 2.5, 0.0])}, grid)
+    assert policy.status == "exploring" and policy.target is not None
+    assert policy.target[0] > 6.5  # the east doorway
+    # With the door itself walled up, the map has nothing left: done.
+    grid.cells[40:60, 80] = OCCUPIED
+    policy = ExplorerPolicy(np.random.default_rng(0))
+    policy.set_teammates(np.array([[4.0, 2.5]]))
+    for _ in range(policy.config.done_after + 1):
+        policy.act({"pose": np.array([2.0, 2.5, 0.0])}, grid)
+    assert policy.status == "done"
+
+
 def test_changing_frame_carries_remembered_obstacles_and_goals_over() -> None:
     grid = open_room()
     pose = np.array([2.0, 4.0, 0.0])
