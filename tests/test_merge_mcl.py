@@ -244,8 +244,6 @@ def test_bad_input():
         MclConfig(z_rand=0.2, unknown_likelihood=0.1)
     with pytest.raises(ValueError, match=r"MclConfig\.n_particles"):
         MclConfig(n_particles=0)
-    with pytest.raises(ValueError, match=r"MclConfig\.min_particles"):
-        MclConfig(n_particles=100, min_particles=200)
     with pytest.raises(ValueError, match=r"MclConfig\.kld_error"):
         MclConfig(kld_error=-0.1)
 
@@ -270,6 +268,8 @@ def test_kld_count_follows_fox_bound():
         assert kld_particle_count(particles_in_bins(k), config) == expected
     assert kld_particle_count(particles_in_bins(1), config) == config.min_particles
     assert kld_particle_count(particles_in_bins(1000), config) == config.n_particles
+    few = MclConfig(n_particles=20)  # fewer than min_particles: n_particles wins
+    assert kld_particle_count(particles_in_bins(1), few) == 20
     fixed = MclConfig(kld_error=0.0)
     assert kld_particle_count(particles_in_bins(1), fixed) == fixed.n_particles
 

@@ -74,7 +74,7 @@ class MclConfig:
     n_particles: int = 1500
     """Most particles kept after a resampling (KLD-sampling picks the count, below)."""
     min_particles: int = 100
-    """Fewest particles kept after a resampling."""
+    """Fewest particles kept after a resampling (``n_particles`` if that is fewer)."""
     kld_error: float = 0.05
     """KLD-sampling's bound on the Kullback-Leibler distance between the particles and the
     posterior they stand for (Fox 2003, epsilon); 0 keeps ``n_particles`` always."""
@@ -186,13 +186,6 @@ class MclConfig:
             unknown,
             self.z_rand < unknown < 1,
             f"in (z_rand={self.z_rand}, 1)",
-        )
-        require(
-            name,
-            "min_particles",
-            self.min_particles,
-            self.min_particles <= self.n_particles,
-            f"<= n_particles ({self.n_particles})",
         )
         skeleton = self.skeleton
         require(
@@ -637,7 +630,8 @@ def kld_particle_count(particles: FloatArray, config: MclConfig) -> int:
     number of bins of a (``kld_bin_size``, ``kld_bin_size``, ``kld_bin_angle``) histogram
     the particles occupy, ``(k - 1) / (2 epsilon) (1 - a + sqrt(a) z)^3`` with
     ``a = 2 / (9 (k - 1))``, ``epsilon = kld_error`` and ``z = kld_quantile``; clipped to
-    ``[min_particles, n_particles]``. ``kld_error = 0`` gives ``n_particles``.
+    ``[min_particles, n_particles]`` (``n_particles`` wins). ``kld_error = 0`` gives
+    ``n_particles``.
 
     ``particles`` is a resampling at the largest count: ``k`` counted on it is at least
     what the smaller set would occupy, so the count errs on the large side.
@@ -645,10 +639,11 @@ def kld_particle_count(particles: FloatArray, config: MclConfig) -> int:
     if config.kld_error == 0:
         return config.n_particles
     k = _occupied_bins(particles, config.kld_bin_size, config.kld_bin_angle)
-    if k <= 1:
-        return config.min_particles
-    a = 2.0 / (9.0 * (k - 1))
-    bound = (k - 1) / (2.0 * config.kld_error) * (1.0 - a + math.sqrt(a) * config.kld_quantile) ** 3
+    bound = 0.0
+    if k > 1:
+        a = 2.0 / (9.0 * (k - 1))
+        z = config.kld_quantile
+        bound = (k - 1) / (2.0 * config.kld_error) * (1.0 - a + math.sqrt(a) * z) ** 3
     return int(min(max(math.ceil(bound), config.min_particles), config.n_particles))
 
 
