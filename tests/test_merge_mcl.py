@@ -14,6 +14,7 @@ from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.merge.mcl import (
     MclConfig,
     beam_log_likelihoods,
+    kld_particle_count,
     localize_in_map,
     low_variance_resample,
     particle_clusters,
@@ -219,7 +220,7 @@ def test_mcl_converges_on_a_map_it_fully_knows(office_map):
         result = localize_in_map(
             prepared, run, config=config, rng=np.random.default_rng(index), trace=True
         )
-        assert result.particles.shape == (config.n_particles, 3)
+        assert config.min_particles <= len(result.particles) <= config.n_particles
         assert result.weights.sum() == pytest.approx(1.0)
         assert len(result.history) == len(run.ranges)
         truth = run.poses_in_map1[-1]
@@ -243,6 +244,67 @@ def test_bad_input():
         MclConfig(z_rand=0.2, unknown_likelihood=0.1)
     with pytest.raises(ValueError, match=r"MclConfig\.n_particles"):
         MclConfig(n_particles=0)
+    with pytest.raises(ValueError, match=r"MclConfig\.kld_error"):
+        MclConfig(kld_error=-0.1)
+
+
+def test_kld_count_follows_fox_bound():
+    """The particle count is Fox's (2003) bound on the occupied histogram bins, clipped."""
+    config = MclConfig(n_particles=5000, min_particles=10)
+    rng = np.random.default_rng(4)
+
+    def particles_in_bins(k: int) -> np.ndarray:
+        # k distinct bins: one particle at the centre of each 0.5 m bin along x, repeated.
+        centres = (np.arange(k) + 0.5) * config.kld_bin_size
+        x = np.repeat(centres, 7)
+        theta = np.full(len(x), 0.5 * config.kld_bin_angle - np.pi)
+        return np.column_stack([x, np.zeros(len(x)) + 0.25, theta])[rng.permutation(len(x))]
+
+    for k, expected in ((2, 66), (20, 363), (100, 1347)):
+        # (k - 1) / (2 eps) (1 - a + sqrt(a) z)^3, a = 2 / (9 (k - 1)), eps 0.05, z 2.326
+        a = 2.0 / (9.0 * (k - 1))
+        bound = (k - 1) / 0.1 * (1.0 - a + math.sqrt(a) * 2.326) ** 3
+        assert math.ceil(bound) == expected
+        assert kld_particle_count(particles_in_bins(k), config) == expected
+    assert kld_particle_count(particles_in_bins(1), config) == config.min_particles
+    assert kld_particle_count(particles_in_bins(1000), config) == config.n_particles
+    few = MclConfig(n_particles=20)  # fewer than min_particles: n_particles wins
+    assert kld_particle_count(particles_in_bins(1), few) == 20
+    fixed = MclConfig(kld_error=0.0)
+    assert kld_particle_count(particles_in_bins(1), fixed) == fixed.n_particles
+
+
+def test_kld_count_matches_numpy_bins():
+    """The bin count behind the KLD bound is numpy's distinct-row count of the bins."""
+    from mrslam_env.merge.mcl import _occupied_bins
+
+    rng = np.random.default_rng(5)
+    for n in (0, 1, 30, 2000):
+        particles = np.column_stack(
+            [rng.normal(-3, 4, n), rng.normal(2, 3, n), rng.uniform(-np.pi, np.pi, n)]
+        )
+        bins = np.column_stack(
+            [
+                np.floor(particles[:, 0] / 0.5),
+                np.floor(particles[:, 1] / 0.5),
+                np.floor((particles[:, 2] + np.pi) / 0.2),
+            ]
+        )
+        assert _occupied_bins(particles, 0.5, 0.2) == len(np.unique(bins, axis=0))
+
+
+def test_converged_filter_keeps_fewer_particles(office_map):
+    """Once the particles gather in a few poses, KLD-sampling keeps far fewer of them;
+    with ``kld_error = 0`` the count stays ``n_particles``."""
+    runs = virtual_robot_runs(office_map, config=VirtualRobotConfig(), rng=np.random.default_rng(0))
+    prepared = prepare_localization_map(office_map, config=MclConfig())
+    counts = []
+    for config in (MclConfig(), MclConfig(kld_error=0.0)):
+        result = localize_in_map(prepared, runs[0], config=config, rng=np.random.default_rng(0))
+        assert result.converged
+        counts.append(len(result.particles))
+    assert counts[0] <= 0.5 * MclConfig().n_particles
+    assert counts[1] == MclConfig().n_particles
 
 
 def test_scan_endpoints_skip_invalid_and_no_return_beams(office_map):

@@ -19,9 +19,14 @@ limitation and a measurement model for a *partial* map:
   standing in an OCCUPIED cell is all but ruled out, one in UNKNOWN space penalised. The
   per-scan weight is ``exp(evidence_per_scan * mean log p)``: a mean over beams, so that
   the many correlated beams of one scan do not collapse the filter in one step.
-* **Resampling**: low-variance resampling when the effective sample size drops below
-  ``resample_threshold * N``; while not converged a few particles are re-drawn near the
-  skeleton (the run may only enter the overlap later).
+* **Resampling**: low-variance resampling after the first scan and whenever the
+  effective sample size drops below ``resample_threshold * N``; while not converged a few
+  particles are re-drawn near the skeleton (the run may only enter the overlap later).
+  How many are kept is KLD-sampling's bound (Fox, IJRR 2003): enough that, with
+  probability ``1 - delta``, the Kullback-Leibler distance between the particles and the
+  posterior is below ``kld_error``, given the ``k`` histogram bins the posterior occupies
+  (:func:`kld_particle_count`). A spread-out filter keeps ``n_particles``; once it has
+  gathered in a few poses it keeps a few hundred.
 * **Convergence**: the particles are clustered in (x, y, theta)
   (:func:`particle_clusters`); the filter has converged when at most ``max_clusters``
   clusters hold ``converged_fraction`` of the weight.
@@ -50,6 +55,7 @@ __all__ = [
     "MclResult",
     "ParticleCluster",
     "beam_log_likelihoods",
+    "kld_particle_count",
     "localize_in_map",
     "low_variance_resample",
     "particle_clusters",
@@ -66,8 +72,19 @@ class MclConfig:
     """Partial-map MCL (module doc)."""
 
     n_particles: int = 1500
-    """Particles kept after the first scan."""
-    initial_particles: int = 20000
+    """Most particles kept after a resampling (KLD-sampling picks the count, below)."""
+    min_particles: int = 100
+    """Fewest particles kept after a resampling (``n_particles`` if that is fewer)."""
+    kld_error: float = 0.05
+    """KLD-sampling's bound on the Kullback-Leibler distance between the particles and the
+    posterior they stand for (Fox 2003, epsilon); 0 keeps ``n_particles`` always."""
+    kld_quantile: float = 2.326
+    """Upper standard normal quantile of KLD-sampling's confidence (z at 1 - delta = 0.99)."""
+    kld_bin_size: float = 0.5
+    """x, y size of the KLD-sampling histogram's bins, m."""
+    kld_bin_angle: float = math.radians(10.0)
+    """Heading size of the KLD-sampling histogram's bins, rad."""
+    initial_particles: int = 10000
     """Particles drawn near the skeleton and weighed by the first scan."""
     skeleton_radius: float = 0.3
     """Initial particles lie within this distance of a skeleton cell, m."""
@@ -134,8 +151,12 @@ class MclConfig:
                 "cluster_angle",
                 "z_rand",
                 "unknown_likelihood",
+                "kld_quantile",
+                "kld_bin_size",
+                "kld_bin_angle",
             ),
             non_negative=(
+                "kld_error",
                 "skeleton_radius",
                 "aligned_heading_std",
                 "motion_xy_noise",
@@ -146,7 +167,13 @@ class MclConfig:
                 "occupied_pose_penalty",
                 *fractions,
             ),
-            counts=("n_particles", "initial_particles", "beams_per_scan", "max_clusters"),
+            counts=(
+                "n_particles",
+                "min_particles",
+                "initial_particles",
+                "beams_per_scan",
+                "max_clusters",
+            ),
         )
         for attr in fractions:
             value = getattr(self, attr)
@@ -346,7 +373,7 @@ def sample_near_skeleton(
     attempts = 0
     while len(out) < count and attempts < 20:
         attempts += 1
-        n = 2 * (count - len(out)) + 16
+        n = count - len(out) + 16  # the cells that miss FREE space are made up next round
         pick = rng.integers(0, len(prepared.sample_cells), size=n)
         unit_radius = rng.random(n)
         angle = rng.uniform(-np.pi, np.pi, n)
@@ -596,6 +623,47 @@ def _low_variance_indices(weights: FloatArray, count: int, start: float) -> NDAr
             index += 1
         out[k] = index
     return out
+
+
+def kld_particle_count(particles: FloatArray, config: MclConfig) -> int:
+    """How many particles KLD-sampling keeps (Fox, IJRR 2003, eq. 11): with ``k`` the
+    number of bins of a (``kld_bin_size``, ``kld_bin_size``, ``kld_bin_angle``) histogram
+    the particles occupy, ``(k - 1) / (2 epsilon) (1 - a + sqrt(a) z)^3`` with
+    ``a = 2 / (9 (k - 1))``, ``epsilon = kld_error`` and ``z = kld_quantile``; clipped to
+    ``[min_particles, n_particles]`` (``n_particles`` wins). ``kld_error = 0`` gives
+    ``n_particles``.
+
+    ``particles`` is a resampling at the largest count: ``k`` counted on it is at least
+    what the smaller set would occupy, so the count errs on the large side.
+    """
+    if config.kld_error == 0:
+        return config.n_particles
+    k = _occupied_bins(particles, config.kld_bin_size, config.kld_bin_angle)
+    bound = 0.0
+    if k > 1:
+        a = 2.0 / (9.0 * (k - 1))
+        z = config.kld_quantile
+        bound = (k - 1) / (2.0 * config.kld_error) * (1.0 - a + math.sqrt(a) * z) ** 3
+    return int(min(max(math.ceil(bound), config.min_particles), config.n_particles))
+
+
+@numba.njit(cache=True)
+def _occupied_bins(particles: FloatArray, size: float, angle: float) -> int:
+    """Number of distinct (size, size, angle) histogram bins the particles fall in."""
+    n = particles.shape[0]
+    key = np.empty(n, dtype=np.int64)
+    offset = 1 << 20  # bins packed 21 bits each: |x|, |y| < 2**20 bins
+    for i in range(n):
+        bx = math.floor(particles[i, 0] / size) + offset
+        by = math.floor(particles[i, 1] / size) + offset
+        bt = math.floor((particles[i, 2] + math.pi) / angle)
+        key[i] = (bx << 42) | (by << 21) | bt
+    key.sort()
+    distinct = 1 if n else 0
+    for i in range(1, n):
+        if key[i] != key[i - 1]:
+            distinct += 1
+    return distinct
 
 
 def particle_clusters(
@@ -881,11 +949,11 @@ def localize_in_map(
             if held >= config.converged_fraction and converged_at < 0:
                 converged_at = k
         effective = 1.0 / float(weights @ weights)
-        if not last and (
-            len(particles) != config.n_particles
-            or effective < config.resample_threshold * len(particles)
-        ):
+        if not last and (k == 0 or effective < config.resample_threshold * len(particles)):
             keep = low_variance_resample(weights, config.n_particles, rng)
+            count = kld_particle_count(particles[keep], config)
+            if count < len(keep):
+                keep = low_variance_resample(weights, count, rng)
             particles = particles[keep]
             log_weights = np.zeros(len(particles))
             if converged_at < 0 and config.injection_fraction > 0:
