@@ -460,9 +460,6 @@ def _trace_edges(
     offsets = np.zeros(65, dtype=np.int64)
     n_edges = 0
     n_cells = 0
-    seen = set()
-    seen.add(np.int64(-1))
-    span = np.int64(rows) * np.int64(cols)
     ring = _RING
     loops = np.empty((0, 2), dtype=np.int64)
     n_loops = 0
@@ -498,12 +495,8 @@ def _trace_edges(
                 if direct:
                     if node_of[rn, cn] == node_of[r0, c0]:
                         continue  # inside one junction cluster
-                    a = r0 * cols + c0
-                    b = rn * cols + cn
-                    key = min(a, b) * span + max(a, b)
-                    if key in seen:
-                        continue
-                    seen.add(key)
+                    if rn * cols + cn < r0 * cols + c0:
+                        continue  # added from that pixel, earlier in row-major order
                 elif phase == 0 and visited[rn, cn]:
                     continue
                 if n_edges + 1 >= starts.shape[0]:
