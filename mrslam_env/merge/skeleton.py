@@ -461,21 +461,19 @@ def _trace_edges(
     n_edges = 0
     n_cells = 0
     ring = _RING
-    loops = np.empty((0, 2), dtype=np.int64)
+    loops = np.empty((16, 2), dtype=np.int64)
     n_loops = 0
+    firsts = np.empty((8, 2), dtype=np.int64)
     for phase in range(2):
-        if phase == 0:
-            order = np.argwhere(node_of >= 0)
-        else:
-            order = np.argwhere(thin & ~visited & (node_of < 0))
-            loops = np.empty((order.shape[0], 2), dtype=np.int64)
-        for index in range(order.shape[0]):
-            r0, c0 = order[index, 0], order[index, 1]
-            firsts = np.empty((8, 2), dtype=np.int64)
+        for pixel in range(rows * cols):  # row-major
+            r0, c0 = pixel // cols, pixel % cols
+            if phase == 0 and node_of[r0, c0] < 0:
+                continue
             n_first = 0
             if phase == 1:
-                if visited[r0, c0]:
+                if not thin[r0, c0] or node_of[r0, c0] >= 0 or visited[r0, c0]:
                     continue
+                loops = _grow_rows(loops, n_loops + 1)
                 node_of[r0, c0] = node_count + n_loops
                 loops[n_loops, 0] = r0
                 loops[n_loops, 1] = c0
