@@ -372,6 +372,14 @@ def _wrap(angle: float) -> float:
     return math.pi if wrapped <= -math.pi else wrapped
 
 
+@numba.njit(cache=True, inline="always")
+def _copy3(source: NDArray[np.float64], target: NDArray[np.float64]) -> None:
+    """``target[:] = source`` for 3-vectors, as a loop: the slice copy's shape check makes
+    numba compile its string formatting, seconds of a first run."""
+    for j in range(3):
+        target[j] = source[j]
+
+
 @numba.njit(cache=True)
 def _walk_until_adapted(
     k: int,
@@ -421,13 +429,13 @@ def _walk_until_adapted(
         take = math.isfinite(psi) and (psi <= psis[0] or worse_ok)
         event = 0
         if take:
-            move[:] = step
+            _copy3(step, move)
             counters[1] += 1
             counters[0] = 0
-            current[:] = candidate
+            _copy3(candidate, current)
             psis[0] = psi
             if psi < psis[1]:
-                best[:] = candidate
+                _copy3(candidate, best)
                 psis[1] = psi
                 best_transform[0] = x
                 best_transform[1] = y
@@ -437,7 +445,7 @@ def _walk_until_adapted(
             counters[0] += 1
             if counters[0] >= stall_iterations:
                 counters[0] = 0
-                current[:] = best
+                _copy3(best, current)
                 psis[0] = psis[1]
                 event = _STALLED
         if trace:

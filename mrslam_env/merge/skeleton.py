@@ -425,7 +425,8 @@ def _grow(buffer: IntArray, needed: int) -> IntArray:
     if needed <= buffer.shape[0]:
         return buffer
     grown = np.empty(max(needed, 2 * buffer.shape[0]), dtype=buffer.dtype)
-    grown[: buffer.shape[0]] = buffer
+    for i in range(buffer.shape[0]):  # a loop: a slice copy's shape check compiles slowly
+        grown[i] = buffer[i]
     return grown
 
 
@@ -435,7 +436,9 @@ def _grow_rows(buffer: IntArray, needed: int) -> IntArray:
     if needed <= buffer.shape[0]:
         return buffer
     grown = np.empty((max(needed, 2 * buffer.shape[0]), 2), dtype=buffer.dtype)
-    grown[: buffer.shape[0]] = buffer
+    for i in range(buffer.shape[0]):  # a loop: a slice copy's shape check compiles slowly
+        grown[i, 0] = buffer[i, 0]
+        grown[i, 1] = buffer[i, 1]
     return grown
 
 

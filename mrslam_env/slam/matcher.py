@@ -377,7 +377,8 @@ def _solve(
     gesv, as numba calls it). ``lu`` and ``pivots`` are workspace."""
     n = a.shape[0]
     _to_fortran(a, lu)
-    out[:] = b
+    for i in range(n):  # not out[:] = b, whose shape check compiles numba's string formatting
+        out[i] = b[i]
     if _XGESV(_FLOAT64, n, 1, lu.ctypes, n, pivots.ctypes, out.ctypes, n) != 0:
         raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
 
