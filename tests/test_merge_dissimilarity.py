@@ -518,13 +518,13 @@ def test_config_errors_name_field_and_value(field: str, value: object) -> None:
 
 
 def test_overlap_psi_tables_give_the_generic_kernels_psi_exactly():
-    """The overlap psi from the precomputed tables (cell centres, distances on known
-    cells) equals, bit for bit, the generic per-term kernel it replaces (forced by
-    dropping the tables), over random maps, origins, resolutions, strides, wall sides and
-    placements, including placements with no overlap."""
+    """psi's kernel from the precomputed tables (cell centres, distances on known cells)
+    equals, bit for bit, its generic per-term path (forced by dropping the tables), over
+    random maps, origins, resolutions, strides, wall sides and placements, including
+    placements with no overlap."""
     from dataclasses import replace
 
-    from mrslam_env.merge.dissimilarity import _has_overlap_tables, _psi
+    from mrslam_env.merge.dissimilarity import _has_overlap_tables, _psi, _psi_tables
 
     rng = np.random.default_rng(21)
     for trial in range(6):
@@ -544,8 +544,11 @@ def test_overlap_psi_tables_give_the_generic_kernels_psi_exactly():
                 transform = np.array(
                     [rng.uniform(-4, 4), rng.uniform(-4, 4), rng.uniform(-math.pi, math.pi)]
                 )
-                fast = _psi(m1, m2, transform, d1, d2, config)
-                slow = _psi(m1, m2, transform, plain1, plain2, config)
+                fast_tables = _psi_tables(m1, m2, d1, d2, config)
+                slow_tables = _psi_tables(m1, m2, plain1, plain2, config)
+                assert fast_tables.fast and not slow_tables.fast
+                fast = _psi(*transform, fast_tables)
+                slow = _psi(*transform, slow_tables)
                 assert fast == slow or (math.isinf(fast) and math.isinf(slow))
 
 

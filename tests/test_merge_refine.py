@@ -145,7 +145,8 @@ def test_seeded_walk_is_deterministic(office_pair) -> None:
 
 def _python_walk(m1, m2, start, config, rng, d1, d2):
     """The walk of refine_random_walk's docstring as a plain numpy loop (psi from
-    :func:`dissimilarity`): the oracle the numba kernel must follow bit for bit."""
+    :func:`dissimilarity`, the kernel the walk calls, checked against the definition in
+    tests/test_merge_dissimilarity.py): the oracle the numba loop must follow bit for bit."""
     cost = config.dissimilarity
 
     def psi_of(transform):
@@ -197,8 +198,8 @@ def _python_walk(m1, m2, start, config, rng, d1, d2):
     ids=["overlap", "wall-sides", "faithful", "faithful-wall-sides"],
 )
 def test_kernel_walk_is_the_numpy_walk_bit_for_bit(office_pair, cost) -> None:
-    """The numba kernel draws the same numbers and computes the same psi as the numpy
-    loop, so every transform and psi is equal, not close, for every psi variant."""
+    """The numba loop draws the same numbers and makes the same moves as the numpy loop,
+    so every transform and psi is equal, not close, for every psi variant."""
     m1, m2 = office_pair
     d1, d2 = distance_maps(m1, sides=True), distance_maps(m2, sides=True)
     config = RandomWalkConfig(iterations=150, stall_iterations=10, dissimilarity=cost)

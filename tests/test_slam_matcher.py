@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 import pytest
 from slam_worlds import NO_DISCS, corridor_world, noisy_scan
@@ -23,7 +24,10 @@ from mrslam_env.slam.grid import OccupancyGrid
 from mrslam_env.slam.matcher import (
     HUBER,
     MIN_RIDGE_VALUE,
+    _check_finite,
+    _determinant,
     _normal_equations,
+    _solve,
     correlative_search,
     interpolate,
     match_scan,
@@ -382,3 +386,30 @@ def test_translational_condition() -> None:
     assert condition < 1e-6
     assert abs(weak @ rotation[:, 0]) == pytest.approx(1.0)
     assert translational_condition(np.zeros((3, 3)))[0] == 0.0
+
+
+@numba.njit(cache=True)
+def _numba_det_and_solve(a: np.ndarray, b: np.ndarray) -> tuple[float, np.ndarray]:
+    return np.linalg.det(a), np.linalg.solve(a, b)
+
+
+def test_refinement_solve_is_numbas_linalg_bit_for_bit() -> None:
+    """The refinement's 3x3 determinant and solve give numba's np.linalg.det and
+    np.linalg.solve to the bit (the same LAPACK calls), on systems shaped like its normal
+    equations (J^T J over a few points, scaled over 12 decades) and on general ones."""
+    rng = np.random.default_rng(3)
+    lu, pivots, step = np.empty((3, 3)), np.empty(3, dtype=np.int32), np.empty(3)
+    for trial in range(2000):
+        jacobian = rng.normal(size=(int(rng.integers(3, 40)), 3)) * [1e-3, 1.0, 1e3]
+        system = jacobian.T @ jacobian * 10.0 ** rng.uniform(-6, 6)
+        if trial % 5 == 0:
+            system = rng.normal(size=(3, 3))
+        rhs = rng.normal(size=3)
+        determinant, solution = _numba_det_and_solve(system, rhs)
+        assert _determinant(system, lu, pivots) == determinant
+        _solve(system, rhs, lu, pivots, step)
+        np.testing.assert_array_equal(step, solution)
+    singular = np.array([[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 1.0, 1.0]])
+    assert _determinant(singular, lu, pivots) == 0.0
+    with pytest.raises(np.linalg.LinAlgError, match="infs or NaNs"):
+        _check_finite(np.eye(3), np.array([0.0, math.nan, 0.0]))

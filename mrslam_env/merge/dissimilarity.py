@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -588,61 +589,6 @@ def _overlap_distance_sum(
     return float(total), count
 
 
-@numba.njit(cache=True)
-def _overlap_psi(
-    free1: NDArray[np.float64],
-    stride1: int,
-    occupied1: NDArray[np.float64],
-    free2: NDArray[np.float64],
-    stride2: int,
-    occupied2: NDArray[np.float64],
-    cos_theta: float,
-    sin_theta: float,
-    x: float,
-    y: float,
-    inv_x: float,
-    inv_y: float,
-    origin1_x: float,
-    origin1_y: float,
-    origin2_x: float,
-    origin2_y: float,
-    resolution: float,
-    free_in_known1: NDArray[np.int32],
-    occupied_in_known1: NDArray[np.int32],
-    free_in_known2: NDArray[np.int32],
-    occupied_in_known2: NDArray[np.int32],
-) -> tuple[float, int, int]:
-    """The overlap psi's four terms (:func:`_psi`, in its order) in one call: psi and the
-    cells counted from m1 into m2 and from m2 into m1."""
-    psi = 0.0
-    counts = [0, 0]
-    for term in range(4):
-        if term == 0:
-            total, count = _overlap_distance_sum(
-                free1, stride1, cos_theta, -sin_theta, inv_x, inv_y, origin2_x, origin2_y,
-                resolution, free_in_known2,
-            )  # fmt: skip
-        elif term == 1:
-            total, count = _overlap_distance_sum(
-                occupied1, 1, cos_theta, -sin_theta, inv_x, inv_y, origin2_x, origin2_y,
-                resolution, occupied_in_known2,
-            )  # fmt: skip
-        elif term == 2:
-            total, count = _overlap_distance_sum(
-                free2, stride2, cos_theta, sin_theta, x, y, origin1_x, origin1_y,
-                resolution, free_in_known1,
-            )  # fmt: skip
-        else:
-            total, count = _overlap_distance_sum(
-                occupied2, 1, cos_theta, sin_theta, x, y, origin1_x, origin1_y,
-                resolution, occupied_in_known1,
-            )  # fmt: skip
-        counts[term // 2] += count
-        if count:
-            psi += total / count
-    return psi, counts[0], counts[1]
-
-
 def _has_overlap_tables(distances: DistanceMaps, grid: GridMap, resolution: float) -> bool:
     """Whether :func:`_overlap_distance_sum` may use the precomputed tables of
     ``distances`` for ``grid`` (made by :func:`distance_maps` of a grid with this origin
@@ -671,97 +617,182 @@ def _free_stride(count: int, max_free_cells: int) -> int:
     return max(1, -(-count // max_free_cells))
 
 
-def _psi(
+class _MapTables(NamedTuple):
+    """One map's inputs of :func:`_psi` (its :class:`DistanceMaps`; empty where unused)."""
+
+    origin_x: float
+    origin_y: float
+    stride: int
+    free_cells: NDArray[np.int64]
+    occupied_cells: NDArray[np.int64]
+    free: NDArray[np.int32]
+    occupied: NDArray[np.int32]
+    known: NDArray[np.bool_]
+    free_centres: NDArray[np.float64]
+    occupied_centres: NDArray[np.float64]
+    free_in_known: NDArray[np.int32]
+    occupied_in_known: NDArray[np.int32]
+    sides: NDArray[np.float64]
+    by_side: NDArray[np.int32]
+
+
+class _PsiTables(NamedTuple):
+    """Both maps' tables and the psi variant: what :func:`_psi` needs to score any
+    ``map1_from_map2`` of one pair (made once a pair by :func:`_psi_tables`)."""
+
+    one: _MapTables
+    two: _MapTables
+    resolution: float
+    fast: bool
+    """From the overlap tables (:func:`_overlap_distance_sum`)."""
+    sides: bool
+    restrict: bool
+    min_overlap_cells: int
+
+
+def _map_tables(grid: GridMap, d: DistanceMaps, config: DissimilarityConfig) -> _MapTables:
+    empty_centres, empty_table = np.empty((2, 0)), np.empty((0, 0), dtype=np.int32)
+    sides, by_side = np.empty(0), np.empty((1, 0, 0), dtype=np.int32)
+    if config.wall_sides:
+        sides, by_side = _side_maps(d)
+    return _MapTables(
+        origin_x=float(grid.origin[0]),
+        origin_y=float(grid.origin[1]),
+        stride=_free_stride(len(d.free_cells), config.max_free_cells),
+        free_cells=d.free_cells,
+        occupied_cells=d.occupied_cells,
+        free=d.free,
+        occupied=d.occupied,
+        known=d.known,
+        free_centres=empty_centres if d.free_centres is None else d.free_centres,
+        occupied_centres=empty_centres if d.occupied_centres is None else d.occupied_centres,
+        free_in_known=empty_table if d.free_in_known is None else d.free_in_known,
+        occupied_in_known=empty_table if d.occupied_in_known is None else d.occupied_in_known,
+        sides=sides,
+        by_side=by_side,
+    )
+
+
+def _psi_tables(
     m1: GridMap,
     m2: GridMap,
-    map1_from_map2: NDArray[np.float64],
     distances1: DistanceMaps,
     distances2: DistanceMaps,
     config: DissimilarityConfig,
-) -> float:
-    """psi for validated inputs (the random walk's inner call)."""
+) -> _PsiTables:
+    """The inputs of :func:`_psi` for validated maps and their distance maps."""
     resolution = m1.resolution
-    restrict = config.restrict_to_overlap
-    x, y, theta = map1_from_map2
-    c, s = math.cos(theta), math.sin(theta)
-    # map2_from_map1 = (R^T, -R^T t)
-    inv_x, inv_y = -(c * x + s * y), -(-s * x + c * y)
-    o1x, o1y = m1.origin
-    o2x, o2y = m2.origin
-    stride1 = _free_stride(len(distances1.free_cells), config.max_free_cells)
-    stride2 = _free_stride(len(distances2.free_cells), config.max_free_cells)
-    # d(m1, m2, c): m1's cells into m2's frame through map2_from_map1, and back.
-    one_into_two = (o1x, o1y, c, -s, inv_x, inv_y, o2x, o2y)
-    two_into_one = (o2x, o2y, c, s, x, y, o1x, o1y)
-    terms = [
-        (0, distances1.free_cells, stride1, one_into_two, distances2.free, distances2.known),
-        (0, distances1.occupied_cells, 1, one_into_two, distances2.occupied, distances2.known),
-        (1, distances2.free_cells, stride2, two_into_one, distances1.free, distances1.known),
-        (1, distances2.occupied_cells, 1, two_into_one, distances1.occupied, distances1.known),
-    ]
     fast = (
-        restrict
+        config.restrict_to_overlap
         and _has_overlap_tables(distances1, m1, resolution)
         and _has_overlap_tables(distances2, m2, resolution)
     )
-    if fast and not config.wall_sides:  # all four terms in one call, from the tables
-        assert distances1.free_centres is not None and distances1.occupied_centres is not None
-        assert distances2.free_centres is not None and distances2.occupied_centres is not None
-        assert distances1.free_in_known is not None and distances1.occupied_in_known is not None
-        assert distances2.free_in_known is not None and distances2.occupied_in_known is not None
-        psi, count1, count2 = _overlap_psi(
-            distances1.free_centres, stride1, distances1.occupied_centres,
-            distances2.free_centres, stride2, distances2.occupied_centres,
-            c, s, x, y, inv_x, inv_y, o1x, o1y, o2x, o2y, resolution,
-            distances1.free_in_known, distances1.occupied_in_known,
-            distances2.free_in_known, distances2.occupied_in_known,
+    return _PsiTables(
+        one=_map_tables(m1, distances1, config),
+        two=_map_tables(m2, distances2, config),
+        resolution=float(resolution),
+        fast=bool(fast),
+        sides=config.wall_sides,
+        restrict=config.restrict_to_overlap,
+        min_overlap_cells=config.min_overlap_cells,
+    )
+
+
+@numba.njit(cache=True)
+def _term(
+    source: _MapTables,
+    target: _MapTables,
+    occupied: bool,
+    fast: bool,
+    cos_theta: float,
+    sin_theta: float,
+    translation_x: float,
+    translation_y: float,
+    resolution: float,
+    restrict: bool,
+) -> tuple[float, int]:
+    """One of psi's directed terms: ``source``'s free (or occupied) cells into ``target``."""
+    if fast:
+        return _overlap_distance_sum(
+            source.occupied_centres if occupied else source.free_centres,
+            1 if occupied else source.stride,
+            cos_theta, sin_theta, translation_x, translation_y,
+            target.origin_x, target.origin_y, resolution,
+            target.occupied_in_known if occupied else target.free_in_known,
         )  # fmt: skip
-        return math.inf if min(count1, count2) < config.min_overlap_cells else psi
-    if config.wall_sides:  # the occupied terms are matched by side below
-        del terms[3], terms[1]
+    return directed_distance_sum(
+        source.occupied_cells if occupied else source.free_cells,
+        1 if occupied else source.stride,
+        source.origin_x, source.origin_y, cos_theta, sin_theta, translation_x, translation_y,
+        target.origin_x, target.origin_y, resolution,
+        target.occupied if occupied else target.free, target.known, restrict,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _side_term(
+    source: _MapTables,
+    target: _MapTables,
+    rotation: float,
+    cos_theta: float,
+    sin_theta: float,
+    translation_x: float,
+    translation_y: float,
+    resolution: float,
+    restrict: bool,
+) -> tuple[float, int]:
+    """psi's occupied term matched by wall side (a sentinel when ``target`` has no wall)."""
+    if target.occupied_cells.shape[0] == 0:
+        return directed_distance_sum(
+            source.occupied_cells, 1, source.origin_x, source.origin_y, cos_theta, sin_theta,
+            translation_x, translation_y, target.origin_x, target.origin_y, resolution,
+            target.occupied, target.known, restrict,
+        )  # fmt: skip
+    return directed_side_distance_sum(
+        source.occupied_cells, source.sides, source.origin_x, source.origin_y, rotation,
+        translation_x, translation_y, target.origin_x, target.origin_y, resolution,
+        target.by_side, target.known, restrict, SIDE_DISTANCE_CAP,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _psi(x: float, y: float, theta: float, tables: _PsiTables) -> float:
+    """psi of ``map1_from_map2 = (x, y, theta)``: the one kernel behind
+    :func:`dissimilarity` and the random walk (:mod:`mrslam_env.merge.refine`)."""
+    one, two, resolution = tables.one, tables.two, tables.resolution
+    fast, restrict = tables.fast, tables.restrict
+    c, s = math.cos(theta), math.sin(theta)
+    # map2_from_map1 = (R^T, -R^T t)
+    inv_x, inv_y = -(c * x + s * y), -(-s * x + c * y)
     psi = 0.0
-    counts = [0, 0]
-    for direction, cells, stride, placement, distance, known in terms:
-        if len(cells) == 0:
-            continue
-        if fast:  # a free term (wall sides): the same sum from the tables
-            source, target = (
-                (distances1, distances2) if direction == 0 else (distances2, distances1)
-            )
-            assert source.free_centres is not None and target.free_in_known is not None
-            total, count = _overlap_distance_sum(
-                source.free_centres, stride, *placement[2:], resolution, target.free_in_known
+    count1 = 0
+    count2 = 0
+    # d(m1, m2, c): m1's cells into m2's frame through map2_from_map1, and back; without
+    # wall sides in the order free, occupied of m1, then of m2; with them, the free terms
+    # first, then the occupied terms by side.
+    for term in range(4):
+        direction = term // 2 if not tables.sides else term % 2
+        occupied = term % 2 == 1 if not tables.sides else term >= 2
+        if tables.sides and occupied:
+            if direction == 0:
+                total, count = _side_term(
+                    one, two, -theta, c, -s, inv_x, inv_y, resolution, restrict
+                )
+            else:
+                total, count = _side_term(two, one, theta, c, s, x, y, resolution, restrict)
+        elif direction == 0:
+            total, count = _term(
+                one, two, occupied, fast, c, -s, inv_x, inv_y, resolution, restrict
             )
         else:
-            total, count = directed_distance_sum(
-                cells, stride, *placement, resolution, distance, known, restrict
-            )
-        counts[direction] += count
+            total, count = _term(two, one, occupied, fast, c, s, x, y, resolution, restrict)
+        if direction == 0:
+            count1 += count
+        else:
+            count2 += count
         if count:
             psi += total / count
-    if config.wall_sides:
-        for direction, source, target, rotation, placement in (
-            (0, distances1, distances2, -theta, one_into_two),
-            (1, distances2, distances1, theta, two_into_one),
-        ):
-            if len(source.occupied_cells) == 0:
-                continue
-            if len(target.occupied_cells) == 0:  # no wall to match: the sentinel
-                total, count = directed_distance_sum(
-                    source.occupied_cells, 1, *placement, resolution, target.occupied,
-                    target.known, restrict,
-                )  # fmt: skip
-            else:
-                sides, by_side = _side_maps(source)[0], _side_maps(target)[1]
-                total, count = directed_side_distance_sum(
-                    source.occupied_cells, sides, placement[0], placement[1], rotation,
-                    *placement[4:], resolution, by_side, target.known, restrict,
-                    SIDE_DISTANCE_CAP,
-                )  # fmt: skip
-            counts[direction] += count
-            if count:
-                psi += total / count
-    if restrict and min(counts) < config.min_overlap_cells:
+    if restrict and min(count1, count2) < tables.min_overlap_cells:
         return math.inf
     return psi
 
@@ -813,7 +844,8 @@ def dissimilarity(
     config = config or DissimilarityConfig()
     d1 = _checked_distances(m1, distances1, "distances1", sides=config.wall_sides)
     d2 = _checked_distances(m2, distances2, "distances2", sides=config.wall_sides)
-    return _psi(m1, m2, transform, d1, d2, config)
+    x, y, theta = (float(v) for v in transform)
+    return _psi(x, y, theta, _psi_tables(m1, m2, d1, d2, config))
 
 
 def acceptance_index(

@@ -29,7 +29,6 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -38,20 +37,15 @@ from numpy.typing import ArrayLike, NDArray
 from mrslam_env.geometry import wrap_scalar
 from mrslam_env.gridmap import GridMap
 from mrslam_env.merge.dissimilarity import (
-    SIDE_DISTANCE_CAP,
     DissimilarityConfig,
     DistanceMaps,
     _check_has_known,
     _checked_distances,
-    _free_stride,
-    _has_overlap_tables,
-    _overlap_distance_sum,
     _psi,
-    _side_maps,
+    _psi_tables,
+    _PsiTables,
     check_same_resolution,
     check_transform,
-    directed_distance_sum,
-    directed_side_distance_sum,
 )
 from mrslam_env.validation import check_fields, require
 
@@ -292,7 +286,8 @@ def refine_random_walk(
     d1 = _checked_distances(m1, distances1, "distances1", sides=cost.wall_sides)
     d2 = _checked_distances(m2, distances2, "distances2", sides=cost.wall_sides)
 
-    initial_psi = _psi(m1, m2, start, d1, d2, cost)
+    tables = _psi_tables(m1, m2, d1, d2, cost)
+    initial_psi = _psi(start[0], start[1], start[2], tables)
     pivot = _pivot(m2, d2)
     current = _to_pivot_parameters(start, pivot)
     best, best_transform = current.copy(), start.copy()
@@ -305,7 +300,6 @@ def refine_random_walk(
     size = n if trace else 0
     candidates, candidate_psi = np.empty((size, 3)), np.empty(size)
     accepted, best_history = np.zeros(size, dtype=np.bool_), np.empty(size)
-    tables = _walk_tables(m1, m2, d1, d2, cost)
     k = 0
     while k < n:
         # Only accepted moves and stalls change the proposal: the kernel walks until one.
@@ -353,86 +347,11 @@ def refine_random_walk(
 # :func:`adapted_proposal` stays numpy (its covariance and Cholesky factor come from BLAS and
 # LAPACK, whose rounding a numba loop would not reproduce). The kernel draws from the same
 # generator in the same order (numba's ``Generator`` gives numpy's stream) and evaluates psi
-# with the kernels of :func:`~mrslam_env.merge.dissimilarity._psi`, in its order: the walk is
-# the Python walk's bit for bit (tests/test_merge_refine.py).
+# with :func:`~mrslam_env.merge.dissimilarity._psi`, the kernel behind ``dissimilarity``: the
+# walk is the Python walk's bit for bit (tests/test_merge_refine.py).
 
 _ACCEPTED = 1
 _STALLED = 2
-
-
-class _MapTables(NamedTuple):
-    """One map's inputs of :func:`_walk_psi` (:class:`DistanceMaps`; empty where unused)."""
-
-    origin_x: float
-    origin_y: float
-    stride: int
-    free_cells: NDArray[np.int64]
-    occupied_cells: NDArray[np.int64]
-    free: NDArray[np.int32]
-    occupied: NDArray[np.int32]
-    known: NDArray[np.bool_]
-    free_centres: NDArray[np.float64]
-    occupied_centres: NDArray[np.float64]
-    free_in_known: NDArray[np.int32]
-    occupied_in_known: NDArray[np.int32]
-    sides: NDArray[np.float64]
-    by_side: NDArray[np.int32]
-
-
-class _WalkTables(NamedTuple):
-    """Both maps' tables and how :func:`~mrslam_env.merge.dissimilarity._psi` combines them."""
-
-    one: _MapTables
-    two: _MapTables
-    resolution: float
-    fast: bool
-    """From the overlap tables (``_psi``'s fast path)."""
-    sides: bool
-    restrict: bool
-    min_overlap_cells: int
-
-
-def _map_tables(grid: GridMap, d: DistanceMaps, config: DissimilarityConfig) -> _MapTables:
-    empty_centres, empty_table = np.empty((2, 0)), np.empty((0, 0), dtype=np.int32)
-    sides, by_side = np.empty(0), np.empty((1, 0, 0), dtype=np.int32)
-    if config.wall_sides:
-        sides, by_side = _side_maps(d)
-    return _MapTables(
-        origin_x=float(grid.origin[0]),
-        origin_y=float(grid.origin[1]),
-        stride=_free_stride(len(d.free_cells), config.max_free_cells),
-        free_cells=d.free_cells,
-        occupied_cells=d.occupied_cells,
-        free=d.free,
-        occupied=d.occupied,
-        known=d.known,
-        free_centres=empty_centres if d.free_centres is None else d.free_centres,
-        occupied_centres=empty_centres if d.occupied_centres is None else d.occupied_centres,
-        free_in_known=empty_table if d.free_in_known is None else d.free_in_known,
-        occupied_in_known=empty_table if d.occupied_in_known is None else d.occupied_in_known,
-        sides=sides,
-        by_side=by_side,
-    )
-
-
-def _walk_tables(
-    m1: GridMap, m2: GridMap, d1: DistanceMaps, d2: DistanceMaps, config: DissimilarityConfig
-) -> _WalkTables:
-    resolution = m1.resolution
-    fast = (
-        config.restrict_to_overlap
-        and _has_overlap_tables(d1, m1, resolution)
-        and _has_overlap_tables(d2, m2, resolution)
-    )
-    return _WalkTables(
-        one=_map_tables(m1, d1, config),
-        two=_map_tables(m2, d2, config),
-        resolution=float(resolution),
-        fast=bool(fast),
-        sides=config.wall_sides,
-        restrict=config.restrict_to_overlap,
-        min_overlap_cells=config.min_overlap_cells,
-    )
 
 
 @numba.njit(cache=True)
@@ -453,102 +372,12 @@ def _wrap(angle: float) -> float:
     return math.pi if wrapped <= -math.pi else wrapped
 
 
-@numba.njit(cache=True)
-def _term(
-    source: _MapTables,
-    target: _MapTables,
-    occupied: bool,
-    fast: bool,
-    cos_theta: float,
-    sin_theta: float,
-    translation_x: float,
-    translation_y: float,
-    resolution: float,
-    restrict: bool,
-) -> tuple[float, int]:
-    """One of psi's directed terms: ``source``'s free (or occupied) cells into ``target``."""
-    if fast:
-        return _overlap_distance_sum(
-            source.occupied_centres if occupied else source.free_centres,
-            1 if occupied else source.stride,
-            cos_theta, sin_theta, translation_x, translation_y,
-            target.origin_x, target.origin_y, resolution,
-            target.occupied_in_known if occupied else target.free_in_known,
-        )  # fmt: skip
-    return directed_distance_sum(
-        source.occupied_cells if occupied else source.free_cells,
-        1 if occupied else source.stride,
-        source.origin_x, source.origin_y, cos_theta, sin_theta, translation_x, translation_y,
-        target.origin_x, target.origin_y, resolution,
-        target.occupied if occupied else target.free, target.known, restrict,
-    )  # fmt: skip
-
-
-@numba.njit(cache=True)
-def _side_term(
-    source: _MapTables,
-    target: _MapTables,
-    rotation: float,
-    cos_theta: float,
-    sin_theta: float,
-    translation_x: float,
-    translation_y: float,
-    resolution: float,
-    restrict: bool,
-) -> tuple[float, int]:
-    """psi's occupied term matched by wall side (a sentinel when ``target`` has no wall)."""
-    if target.occupied_cells.shape[0] == 0:
-        return directed_distance_sum(
-            source.occupied_cells, 1, source.origin_x, source.origin_y, cos_theta, sin_theta,
-            translation_x, translation_y, target.origin_x, target.origin_y, resolution,
-            target.occupied, target.known, restrict,
-        )  # fmt: skip
-    return directed_side_distance_sum(
-        source.occupied_cells, source.sides, source.origin_x, source.origin_y, rotation,
-        translation_x, translation_y, target.origin_x, target.origin_y, resolution,
-        target.by_side, target.known, restrict, SIDE_DISTANCE_CAP,
-    )  # fmt: skip
-
-
-@numba.njit(cache=True)
-def _walk_psi(x: float, y: float, theta: float, tables: _WalkTables) -> float:
-    """:func:`~mrslam_env.merge.dissimilarity._psi` of ``(x, y, theta)``: the same kernels
-    in the same order, so the same float."""
-    one, two, resolution = tables.one, tables.two, tables.resolution
-    fast, restrict = tables.fast, tables.restrict
-    c, s = math.cos(theta), math.sin(theta)
-    inv_x, inv_y = -(c * x + s * y), -(-s * x + c * y)
-    psi = 0.0
-    count1 = 0
-    count2 = 0
-    # d(m1, m2, c): m1's cells into m2's frame through map2_from_map1, and back; without
-    # wall sides in the order free, occupied of m1, then of m2; with them, the free terms
-    # first, then the occupied terms by side.
-    for term in range(4):
-        direction = term // 2 if not tables.sides else term % 2
-        occupied = term % 2 == 1 if not tables.sides else term >= 2
-        if tables.sides and occupied:
-            if direction == 0:
-                total, count = _side_term(
-                    one, two, -theta, c, -s, inv_x, inv_y, resolution, restrict
-                )
-            else:
-                total, count = _side_term(two, one, theta, c, s, x, y, resolution, restrict)
-        elif direction == 0:
-            total, count = _term(
-                one, two, occupied, fast, c, -s, inv_x, inv_y, resolution, restrict
-            )
-        else:
-            total, count = _term(two, one, occupied, fast, c, s, x, y, resolution, restrict)
-        if direction == 0:
-            count1 += count
-        else:
-            count2 += count
-        if count:
-            psi += total / count
-    if restrict and min(count1, count2) < tables.min_overlap_cells:
-        return math.inf
-    return psi
+@numba.njit(cache=True, inline="always")
+def _copy3(source: NDArray[np.float64], target: NDArray[np.float64]) -> None:
+    """``target[:] = source`` for 3-vectors, as a loop: the slice copy's shape check makes
+    numba compile its string formatting, seconds of a first run."""
+    for j in range(3):
+        target[j] = source[j]
 
 
 @numba.njit(cache=True)
@@ -568,7 +397,7 @@ def _walk_until_adapted(
     psis: NDArray[np.float64],
     counters: NDArray[np.int64],
     move: NDArray[np.float64],
-    tables: _WalkTables,
+    tables: _PsiTables,
     trace: bool,
     candidates: NDArray[np.float64],
     candidate_psi: NDArray[np.float64],
@@ -596,17 +425,17 @@ def _walk_until_adapted(
         c, s = math.cos(candidate[2]), math.sin(candidate[2])
         x = candidate[0] - (c * pivot_x - s * pivot_y)
         y = candidate[1] - (s * pivot_x + c * pivot_y)
-        psi = _walk_psi(x, y, candidate[2], tables)
+        psi = _psi(x, y, candidate[2], tables)
         take = math.isfinite(psi) and (psi <= psis[0] or worse_ok)
         event = 0
         if take:
-            move[:] = step
+            _copy3(step, move)
             counters[1] += 1
             counters[0] = 0
-            current[:] = candidate
+            _copy3(candidate, current)
             psis[0] = psi
             if psi < psis[1]:
-                best[:] = candidate
+                _copy3(candidate, best)
                 psis[1] = psi
                 best_transform[0] = x
                 best_transform[1] = y
@@ -616,7 +445,7 @@ def _walk_until_adapted(
             counters[0] += 1
             if counters[0] >= stall_iterations:
                 counters[0] = 0
-                current[:] = best
+                _copy3(best, current)
                 psis[0] = psis[1]
                 event = _STALLED
         if trace:

@@ -425,7 +425,8 @@ def _grow(buffer: IntArray, needed: int) -> IntArray:
     if needed <= buffer.shape[0]:
         return buffer
     grown = np.empty(max(needed, 2 * buffer.shape[0]), dtype=buffer.dtype)
-    grown[: buffer.shape[0]] = buffer
+    for i in range(buffer.shape[0]):  # a loop: a slice copy's shape check compiles slowly
+        grown[i] = buffer[i]
     return grown
 
 
@@ -435,7 +436,9 @@ def _grow_rows(buffer: IntArray, needed: int) -> IntArray:
     if needed <= buffer.shape[0]:
         return buffer
     grown = np.empty((max(needed, 2 * buffer.shape[0]), 2), dtype=buffer.dtype)
-    grown[: buffer.shape[0]] = buffer
+    for i in range(buffer.shape[0]):  # a loop: a slice copy's shape check compiles slowly
+        grown[i, 0] = buffer[i, 0]
+        grown[i, 1] = buffer[i, 1]
     return grown
 
 
@@ -460,25 +463,20 @@ def _trace_edges(
     offsets = np.zeros(65, dtype=np.int64)
     n_edges = 0
     n_cells = 0
-    seen = set()
-    seen.add(np.int64(-1))
-    span = np.int64(rows) * np.int64(cols)
     ring = _RING
-    loops = np.empty((0, 2), dtype=np.int64)
+    loops = np.empty((16, 2), dtype=np.int64)
     n_loops = 0
+    firsts = np.empty((8, 2), dtype=np.int64)
     for phase in range(2):
-        if phase == 0:
-            order = np.argwhere(node_of >= 0)
-        else:
-            order = np.argwhere(thin & ~visited & (node_of < 0))
-            loops = np.empty((order.shape[0], 2), dtype=np.int64)
-        for index in range(order.shape[0]):
-            r0, c0 = order[index, 0], order[index, 1]
-            firsts = np.empty((8, 2), dtype=np.int64)
+        for pixel in range(rows * cols):  # row-major
+            r0, c0 = pixel // cols, pixel % cols
+            if phase == 0 and node_of[r0, c0] < 0:
+                continue
             n_first = 0
             if phase == 1:
-                if visited[r0, c0]:
+                if not thin[r0, c0] or node_of[r0, c0] >= 0 or visited[r0, c0]:
                     continue
+                loops = _grow_rows(loops, n_loops + 1)
                 node_of[r0, c0] = node_count + n_loops
                 loops[n_loops, 0] = r0
                 loops[n_loops, 1] = c0
@@ -498,12 +496,8 @@ def _trace_edges(
                 if direct:
                     if node_of[rn, cn] == node_of[r0, c0]:
                         continue  # inside one junction cluster
-                    a = r0 * cols + c0
-                    b = rn * cols + cn
-                    key = min(a, b) * span + max(a, b)
-                    if key in seen:
-                        continue
-                    seen.add(key)
+                    if rn * cols + cn < r0 * cols + c0:
+                        continue  # added from that pixel, earlier in row-major order
                 elif phase == 0 and visited[rn, cn]:
                     continue
                 if n_edges + 1 >= starts.shape[0]:

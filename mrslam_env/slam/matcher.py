@@ -31,9 +31,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numba
 import numpy as np
+from numba.core import types
 from numpy.typing import NDArray
 
 from mrslam_env.slam.config import MatcherConfig
@@ -304,6 +306,83 @@ def _normal_equations(
     return total / n if n > 0 else 0.0
 
 
+# np.linalg.det and np.linalg.solve of a 3x3 system, the same LAPACK calls on the same
+# copies as numba's implementations (so the same floats), without their generic checks and
+# copies, which cost about ten seconds of compiling on a first run.
+_XXGETRF: Any = types.ExternalFunction(
+    "numba_xxgetrf",
+    types.intc(
+        types.char, types.intp, types.intp, types.CPointer(types.float64), types.intp,
+        types.CPointer(types.int32),
+    ),
+)  # fmt: skip
+_XGESV: Any = types.ExternalFunction(
+    "numba_xgesv",
+    types.intc(
+        types.char, types.intp, types.intp, types.CPointer(types.float64), types.intp,
+        types.CPointer(types.int32), types.CPointer(types.float64), types.intp,
+    ),
+)  # fmt: skip
+_FLOAT64 = ord("d")
+
+
+@numba.njit(cache=True)
+def _check_finite(system: FloatArray, rhs: FloatArray) -> None:
+    """The error np.linalg.solve raises on a non-finite entry."""
+    for i in range(system.shape[0]):
+        ok = math.isfinite(rhs[i])
+        for j in range(system.shape[1]):
+            ok = ok and math.isfinite(system[i, j])
+        if not ok:
+            raise np.linalg.LinAlgError("Array must not contain infs or NaNs")
+
+
+@numba.njit(cache=True)
+def _to_fortran(a: FloatArray, out: FloatArray) -> None:
+    """``out`` (C order) holds ``a`` column by column: ``a`` in Fortran order."""
+    for i in range(a.shape[0]):
+        for j in range(a.shape[1]):
+            out[j, i] = a[i, j]
+
+
+@numba.njit(cache=True)
+def _determinant(a: FloatArray, lu: FloatArray, pivots: NDArray[np.int32]) -> float:
+    """``np.linalg.det(a)`` of a finite square ``a`` as numba computes it: LU by LAPACK's
+    getrf, then ``sign * exp(sum log |u_kk|)``. ``lu`` and ``pivots`` are workspace."""
+    n = a.shape[0]
+    _to_fortran(a, lu)
+    if _XXGETRF(_FLOAT64, n, n, lu.ctypes, n, pivots.ctypes) > 0:
+        return 0.0
+    sign = 1
+    for k in range(n):
+        sign = sign + (pivots[k] != (k + 1))
+    sign = sign & 1
+    if sign == 0:
+        sign = -1
+    total = 0.0
+    for k in range(n):
+        v = lu[k, k]
+        if v < 0.0:
+            sign = -sign
+            v = -v
+        total = total + np.log(v)
+    return (sign + 0.0) * np.exp(total)
+
+
+@numba.njit(cache=True)
+def _solve(
+    a: FloatArray, b: FloatArray, lu: FloatArray, pivots: NDArray[np.int32], out: FloatArray
+) -> None:
+    """``out = np.linalg.solve(a, b)`` for a finite, non-singular square ``a`` (LAPACK's
+    gesv, as numba calls it). ``lu`` and ``pivots`` are workspace."""
+    n = a.shape[0]
+    _to_fortran(a, lu)
+    for i in range(n):  # not out[:] = b, whose shape check compiles numba's string formatting
+        out[i] = b[i]
+    if _XGESV(_FLOAT64, n, 1, lu.ctypes, n, pivots.ctypes, out.ctypes, n) != 0:
+        raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
+
+
 @numba.njit(cache=True)
 def refine_pose(
     fields: Float32Array,
@@ -351,6 +430,7 @@ def refine_pose(
     hessian = np.zeros((3, 3))
     gradient = np.zeros(3)
     delta = np.zeros(3)
+    lu, pivots, step = np.empty((3, 3)), np.empty(3, dtype=np.int32), np.empty(3)
     score = 0.0
     for iteration in range(iterations + 1):
         score = _normal_equations(
@@ -364,9 +444,10 @@ def refine_pose(
         delta[2] = (theta - prior[2] + math.pi) % (2.0 * math.pi) - math.pi
         system = hessian * inv_var + prior_information
         rhs = -(gradient * inv_var + prior_information @ delta)
-        if abs(np.linalg.det(system)) < 1e-12:
+        _check_finite(system, rhs)
+        if abs(_determinant(system, lu, pivots)) < 1e-12:
             break
-        step = np.linalg.solve(system, rhs)
+        _solve(system, rhs, lu, pivots, step)
         step /= max(1.0, abs(step[0]) / resolution, abs(step[1]) / resolution, abs(step[2]) / 0.02)
         x, y, theta = x + step[0], y + step[1], theta + step[2]
         if abs(step[0]) < 1e-4 and abs(step[1]) < 1e-4 and abs(step[2]) < 1e-4:
