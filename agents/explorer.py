@@ -759,10 +759,13 @@ class ExplorerPolicy:
         while self._close_returns and self._close_returns[0][0] < horizon:
             self._close_returns.popleft()
 
-    def _with_close_returns(self, grid: GridMap, robots_too: bool = True) -> GridMap:
-        """The map with remembered close returns and (``robots_too``) teammates'
-        footprints marked OCCUPIED (what the planner plans on)."""
-        parts = [p for _, p in self._close_returns]
+    def _with_close_returns(
+        self, grid: GridMap, robots_too: bool = True, returns_too: bool = True
+    ) -> GridMap:
+        """The map with (``returns_too``) remembered close returns and (``robots_too``)
+        the robots in the way (:meth:`_robots_in_the_way`) marked OCCUPIED (what the
+        planner plans on)."""
+        parts = [p for _, p in self._close_returns] if returns_too else []
         robots = self._robots_in_the_way() if robots_too else np.empty((0, 2))
         if len(robots):
             radius_cells = self.config.planner.robot_radius / grid.resolution
@@ -932,18 +935,20 @@ class ExplorerPolicy:
         self._plan_to_frontier(grid, cost_grid, start, reachable, pose, plain)
         if self._target is not None or self.status == "waiting" or plain is None or plain is grid:
             return
-        # Only the map ends exploration: teammates and remembered close returns shape the
-        # paths, but a frontier they cut off (a teammate in the doorway, a jamb's close
-        # returns closing a narrow door) is still to be explored. Plan on the map itself;
-        # the follower's scan guard keeps the robot off what the map does not show.
+        if not self._close_returns and not len(self._teammates):
+            return  # nothing to leave out: the plan on the map itself was this one
+        # Only the map ends exploration: known teammates and remembered close returns
+        # shape the paths, but a frontier they cut off (a teammate in the doorway, a jamb's
+        # close returns closing a narrow door) is still to be explored: plan without them,
+        # the follower's scan guard keeping the robot off them. Robots only sighted (before
+        # a merge) stay in the way: :meth:`_path_blocked` refuses a path through them.
+        lenient = self._with_close_returns(
+            plain, robots_too=not len(self._teammates), returns_too=False
+        )
         self._empty_replans = empty_replans
-        try:
-            cost_grid = inflate(plain, config.planner)
-            start, reachable = reachable_cells(cost_grid, pose, snap_distance=config.start_snap)
-        except ValueError:
-            self._empty_replans += 1
-            return
-        self._plan_to_frontier(plain, cost_grid, start, reachable, pose, plain)
+        cost_grid = inflate(lenient, config.planner)  # fewer obstacles: cannot raise here
+        start, reachable = reachable_cells(cost_grid, pose, snap_distance=config.start_snap)
+        self._plan_to_frontier(lenient, cost_grid, start, reachable, pose, plain)
 
     def _follow(self, cost_grid: CostGrid, cells: IntArray, same_goal: bool = False) -> None:
         path = cost_grid.cell_to_world(shorten_path(cost_grid, cells))

@@ -444,19 +444,37 @@ def test_a_teammate_in_the_doorway_does_not_end_exploration() -> None:
     # exploration: the robot plans to the doorway through the teammate's place.
     grid = two_rooms()
     grid.cells[40:60, 20] = OCCUPIED  # close the west doorway
+    pose = {"pose": np.array([2.0, 2.5, 0.0])}
     policy = ExplorerPolicy(np.random.default_rng(0))
     policy.set_teammates(np.array([[4.0, 2.5]]))  # in the inner door
     for _ in range(policy.config.done_after + 1):
-        policy.act({"pose": np.array([2.0, 2.5, 0.0])}, grid)
+        policy.act(pose, grid)
     assert policy.status == "exploring" and policy.target is not None
     assert policy.target[0] > 6.5  # the east doorway
-    # With the door itself walled up, the map has nothing left: done.
+    # With the door itself walled up, the map has nothing left: done on the last of
+    # done_after replans, one count a replan.
     grid.cells[40:60, 80] = OCCUPIED
     policy = ExplorerPolicy(np.random.default_rng(0))
     policy.set_teammates(np.array([[4.0, 2.5]]))
-    for _ in range(policy.config.done_after + 1):
-        policy.act({"pose": np.array([2.0, 2.5, 0.0])}, grid)
+    for _ in range(policy.config.done_after - 1):
+        policy.act(pose, grid)
+    assert policy.status == "exploring" and policy.target is None
+    policy.act(pose, grid)
     assert policy.status == "done"
+
+
+def test_a_robot_only_sighted_in_the_doorway_is_not_planned_through() -> None:
+    # Before a merge a robot the peer sensor sees stays in the way (the path check would
+    # refuse a path through it on the next step): no plan through the door it stands in,
+    # and no replan on every step either.
+    grid = two_rooms()
+    grid.cells[40:60, 20] = OCCUPIED  # only the east doorway is left, beyond the inner door
+    seen = {"pose": np.array([2.0, 2.5, 0.0]), "peer": np.array([[1.0, 2.0, 0.0, np.pi]])}
+    policy = ExplorerPolicy(np.random.default_rng(0))
+    for _ in range(policy.config.done_after):
+        policy.act(seen, grid)
+    assert policy.status == "done" and policy.target is None
+    assert policy.replans == policy.config.done_after
 
 
 def test_changing_frame_carries_remembered_obstacles_and_goals_over() -> None:

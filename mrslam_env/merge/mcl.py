@@ -633,8 +633,9 @@ def kld_particle_count(particles: FloatArray, config: MclConfig) -> int:
     ``[min_particles, n_particles]`` (``n_particles`` wins). ``kld_error = 0`` gives
     ``n_particles``.
 
-    ``particles`` is a resampling at the largest count: ``k`` counted on it is at least
-    what the smaller set would occupy, so the count errs on the large side.
+    ``particles`` is a resampling at the largest count: ``k`` counted on it is in practice
+    at least what the smaller set occupies (not guaranteed: the smaller set is drawn
+    anew), so the count errs on the large side.
     """
     if config.kld_error == 0:
         return config.n_particles
@@ -652,12 +653,20 @@ def _occupied_bins(particles: FloatArray, size: float, angle: float) -> int:
     """Number of distinct (size, size, angle) histogram bins the particles fall in."""
     n = particles.shape[0]
     key = np.empty(n, dtype=np.int64)
-    offset = 1 << 20  # bins packed 21 bits each: |x|, |y| < 2**20 bins
+    bins = np.empty((n, 3), dtype=np.int64)
     for i in range(n):
-        bx = math.floor(particles[i, 0] / size) + offset
-        by = math.floor(particles[i, 1] / size) + offset
-        bt = math.floor((particles[i, 2] + math.pi) / angle)
-        key[i] = (bx << 42) | (by << 21) | bt
+        bins[i, 0] = math.floor(particles[i, 0] / size)
+        bins[i, 1] = math.floor(particles[i, 1] / size)
+        bins[i, 2] = math.floor((particles[i, 2] + math.pi) / angle)
+    if n:
+        # Packed 21 bits each, counted from the lowest bin: exact while the particles
+        # span fewer than 2**21 bins a dimension (1,000 km at 0.5 m).
+        low_x, low_y, low_t = bins[:, 0].min(), bins[:, 1].min(), bins[:, 2].min()
+        for i in range(n):
+            bx, by, bt = bins[i, 0] - low_x, bins[i, 1] - low_y, bins[i, 2] - low_t
+            if bx >= 1 << 21 or by >= 1 << 21 or bt >= 1 << 21:
+                raise ValueError("KLD bins: the particles span more than 2**21 bins")
+            key[i] = (bx << 42) | (by << 21) | bt
     key.sort()
     distinct = 1 if n else 0
     for i in range(1, n):
