@@ -463,6 +463,34 @@ def test_a_teammate_in_the_doorway_does_not_end_exploration() -> None:
     assert policy.status == "done"
 
 
+def test_close_returns_alone_do_not_end_exploration() -> None:
+    # The only frontier left (the east doorway) lies beyond the inner door, which the
+    # robot's remembered close returns close (a jamb seen from a few cm, the returns a
+    # little off). Regression (planner_test seed 2, team): the robot in the doorway found
+    # no frontier with its close returns marked and reported done. The robot plans to
+    # the doorway on the map itself.
+    grid = two_rooms()
+    grid.cells[40:60, 20] = OCCUPIED  # close the west doorway
+    pose = {"pose": np.array([2.0, 2.5, 0.0])}
+    across_the_door = np.column_stack([np.full(11, 4.0), np.linspace(2.0, 3.0, 11)])
+    policy = ExplorerPolicy(np.random.default_rng(0))
+    policy._close_returns.append((0, across_the_door))
+    for _ in range(policy.config.done_after + 1):
+        policy.act(pose, grid)
+    assert policy.status == "exploring" and policy.target is not None
+    assert policy.target[0] > 6.5  # the east doorway
+    # With the door itself walled up, the map has nothing left: done on the last of
+    # done_after replans, one count a replan.
+    grid.cells[40:60, 80] = OCCUPIED
+    policy = ExplorerPolicy(np.random.default_rng(0))
+    policy._close_returns.append((0, across_the_door))
+    for _ in range(policy.config.done_after - 1):
+        policy.act(pose, grid)
+    assert policy.status == "exploring" and policy.target is None
+    policy.act(pose, grid)
+    assert policy.status == "done"
+
+
 def test_a_robot_only_sighted_in_the_doorway_is_not_planned_through() -> None:
     # Before a merge a robot the peer sensor sees stays in the way (the path check would
     # refuse a path through it on the next step): no plan through the door it stands in,
