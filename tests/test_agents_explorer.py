@@ -436,17 +436,27 @@ def test_a_teammate_is_planned_around() -> None:
     assert np.abs(policy.plan[:, 1] - 4.0).max() < 0.05  # without it, straight through
 
 
-def test_a_teammate_in_the_doorway_does_not_end_exploration() -> None:
-    # The only frontier left (the east doorway) lies beyond the inner door, where the
-    # teammate stands. Regression (planner_test seed 2, team): after the rendezvous both
-    # robots found no frontier on the map with each other's footprints and close returns
-    # marked, reported done and ended the run at 75 % coverage. Only the map ends
-    # exploration: the robot plans to the doorway through the teammate's place.
+def _blocked_at_the_inner_door(blocker: str) -> ExplorerPolicy:
+    policy = ExplorerPolicy(np.random.default_rng(0))
+    if blocker == "teammate":
+        policy.set_teammates(np.array([[4.0, 2.5]]))  # standing in the inner door
+    else:  # a jamb seen from a few cm, the returns a little off, across the door
+        across = np.column_stack([np.full(11, 4.0), np.linspace(2.0, 3.0, 11)])
+        policy._close_returns.append((0, across))
+    return policy
+
+
+@pytest.mark.parametrize("blocker", ["teammate", "close_returns"])
+def test_a_frontier_cut_off_only_by_a_teammate_or_close_returns_is_explored(blocker: str) -> None:
+    # The only frontier left (the east doorway) lies beyond the inner door, which a
+    # teammate standing in it, or the robot's remembered close returns, close in the
+    # planning grid. Regression (planner_test seed 2, team): after the rendezvous both
+    # robots found no frontier so, reported done and ended the run at 75 % coverage.
+    # Only the map ends exploration: the robot plans to the doorway on the map itself.
     grid = two_rooms()
     grid.cells[40:60, 20] = OCCUPIED  # close the west doorway
     pose = {"pose": np.array([2.0, 2.5, 0.0])}
-    policy = ExplorerPolicy(np.random.default_rng(0))
-    policy.set_teammates(np.array([[4.0, 2.5]]))  # in the inner door
+    policy = _blocked_at_the_inner_door(blocker)
     for _ in range(policy.config.done_after + 1):
         policy.act(pose, grid)
     assert policy.status == "exploring" and policy.target is not None
@@ -454,36 +464,7 @@ def test_a_teammate_in_the_doorway_does_not_end_exploration() -> None:
     # With the door itself walled up, the map has nothing left: done on the last of
     # done_after replans, one count a replan.
     grid.cells[40:60, 80] = OCCUPIED
-    policy = ExplorerPolicy(np.random.default_rng(0))
-    policy.set_teammates(np.array([[4.0, 2.5]]))
-    for _ in range(policy.config.done_after - 1):
-        policy.act(pose, grid)
-    assert policy.status == "exploring" and policy.target is None
-    policy.act(pose, grid)
-    assert policy.status == "done"
-
-
-def test_close_returns_alone_do_not_end_exploration() -> None:
-    # The only frontier left (the east doorway) lies beyond the inner door, which the
-    # robot's remembered close returns close (a jamb seen from a few cm, the returns a
-    # little off). Regression (planner_test seed 2, team): the robot in the doorway found
-    # no frontier with its close returns marked and reported done. The robot plans to
-    # the doorway on the map itself.
-    grid = two_rooms()
-    grid.cells[40:60, 20] = OCCUPIED  # close the west doorway
-    pose = {"pose": np.array([2.0, 2.5, 0.0])}
-    across_the_door = np.column_stack([np.full(11, 4.0), np.linspace(2.0, 3.0, 11)])
-    policy = ExplorerPolicy(np.random.default_rng(0))
-    policy._close_returns.append((0, across_the_door))
-    for _ in range(policy.config.done_after + 1):
-        policy.act(pose, grid)
-    assert policy.status == "exploring" and policy.target is not None
-    assert policy.target[0] > 6.5  # the east doorway
-    # With the door itself walled up, the map has nothing left: done on the last of
-    # done_after replans, one count a replan.
-    grid.cells[40:60, 80] = OCCUPIED
-    policy = ExplorerPolicy(np.random.default_rng(0))
-    policy._close_returns.append((0, across_the_door))
+    policy = _blocked_at_the_inner_door(blocker)
     for _ in range(policy.config.done_after - 1):
         policy.act(pose, grid)
     assert policy.status == "exploring" and policy.target is None
