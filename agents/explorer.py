@@ -684,7 +684,7 @@ class ExplorerPolicy:
         self._remember_close_returns(observation.get("scan"), pose)
         reason = self._replan_reason(robot_map, pose)
         if reason:
-            self._replan(self._with_close_returns(robot_map), pose, reason, robot_map)
+            self._replan(self._planning_grid(robot_map), pose, reason, robot_map)
         if self.status in ("done", "waiting", "blocked", "goal_unreachable", "idle"):
             self.follower.clear()
         scan = observation.get("scan")
@@ -759,7 +759,7 @@ class ExplorerPolicy:
         while self._close_returns and self._close_returns[0][0] < horizon:
             self._close_returns.popleft()
 
-    def _with_close_returns(
+    def _planning_grid(
         self, grid: GridMap, robots_too: bool = True, returns_too: bool = True
     ) -> GridMap:
         """The map with (``returns_too``) remembered close returns and (``robots_too``)
@@ -942,9 +942,7 @@ class ExplorerPolicy:
         # close returns closing a narrow door) is still to be explored: plan without them,
         # the follower's scan guard keeping the robot off them. Robots only sighted (before
         # a merge) stay in the way: :meth:`_path_blocked` refuses a path through them.
-        lenient = self._with_close_returns(
-            plain, robots_too=not len(self._teammates), returns_too=False
-        )
+        lenient = self._planning_grid(plain, robots_too=not len(self._teammates), returns_too=False)
         self._empty_replans = empty_replans
         cost_grid = inflate(lenient, config.planner)  # fewer obstacles: cannot raise here
         start, reachable = reachable_cells(cost_grid, pose, snap_distance=config.start_snap)
@@ -998,7 +996,7 @@ class ExplorerPolicy:
                 # The whole search: the joint choice needs every goal's path cost.
                 distances = distance_field(cost_grid, pose, snap_distance=config.start_snap)
                 # The teammates' searches run on the map without their own footprints.
-                plain = grid if plain is None else self._with_close_returns(plain, False)
+                plain = grid if plain is None else self._planning_grid(plain, robots_too=False)
                 teammate_grid = inflate(plain, config.planner)
                 choice = self._joint_choice(frontiers, teammate_grid, distances, excluded, current)
             else:

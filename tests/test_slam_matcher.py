@@ -411,5 +411,7 @@ def test_refinement_solve_is_numbas_linalg_bit_for_bit() -> None:
         np.testing.assert_array_equal(step, solution)
     singular = np.array([[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 1.0, 1.0]])
     assert _determinant(singular, lu, pivots) == 0.0
-    with pytest.raises(np.linalg.LinAlgError, match="infs or NaNs"):
-        _check_finite(np.eye(3), np.array([0.0, math.nan, 0.0]))
+    for bad in (np.array([0.0, math.nan, 0.0]), np.diag([1.0, math.inf, 1.0])):
+        with pytest.raises(np.linalg.LinAlgError, match="infs or NaNs"):
+            _check_finite(bad)
+    _check_finite(np.eye(3))  # finite: no error

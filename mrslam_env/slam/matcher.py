@@ -327,13 +327,10 @@ _FLOAT64 = ord("d")
 
 
 @numba.njit(cache=True)
-def _check_finite(system: FloatArray, rhs: FloatArray) -> None:
-    """The error np.linalg.solve raises on a non-finite entry."""
-    for i in range(system.shape[0]):
-        ok = math.isfinite(rhs[i])
-        for j in range(system.shape[1]):
-            ok = ok and math.isfinite(system[i, j])
-        if not ok:
+def _check_finite(a: FloatArray) -> None:
+    """The error np.linalg.det and np.linalg.solve raise on a non-finite entry."""
+    for value in a.flat:
+        if not math.isfinite(value):
             raise np.linalg.LinAlgError("Array must not contain infs or NaNs")
 
 
@@ -444,9 +441,10 @@ def refine_pose(
         delta[2] = (theta - prior[2] + math.pi) % (2.0 * math.pi) - math.pi
         system = hessian * inv_var + prior_information
         rhs = -(gradient * inv_var + prior_information @ delta)
-        _check_finite(system, rhs)
+        _check_finite(system)  # as np.linalg.det, then np.linalg.solve, checked them
         if abs(_determinant(system, lu, pivots)) < 1e-12:
             break
+        _check_finite(rhs)
         _solve(system, rhs, lu, pivots, step)
         step /= max(1.0, abs(step[0]) / resolution, abs(step[1]) / resolution, abs(step[2]) / 0.02)
         x, y, theta = x + step[0], y + step[1], theta + step[2]
