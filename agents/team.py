@@ -228,11 +228,13 @@ class TeamConfig:
     """While coordinating, a teammate's position and target as last received over the
     link are used for at most this many steps without the link (0: for ever); older,
     they are dropped (they mislead the split of the frontiers more than they help)."""
-    refine_every: int = 0
-    """Steps between re-refinements of the transform on the grown maps (0: never, the
-    default). The relation between the map frames is a constant, best estimated when it
-    is verified, from maps that carry little drift yet; maps grown later carry more, and
-    re-refining on them trades the frames' relation for local alignment."""
+    refine_every: int = 400
+    """Steps between re-refinements of the transform on the grown maps while the link is
+    up (0: never). The maps at verification can overlap too little to fix the heading
+    well; the grown maps overlap more. A re-refinement that leaves the rendezvous
+    tolerances of the verified hypothesis is not kept; given transforms
+    (:meth:`TeamCoordinator.start_coordinated`) are never re-refined
+    (docs/decisions.md)."""
 
     def __post_init__(self) -> None:
         check_fields(
@@ -598,6 +600,9 @@ class TeamCoordinator:
         self._verified_at: list[FloatArray] = [np.zeros(2) for _ in range(n)]
         """Per robot, its position (own map) when the hypothesis that joined it was
         accepted."""
+        self._given = False
+        """The transforms were given (:meth:`start_coordinated`): known, never
+        re-refined."""
         self._shared: dict[tuple[int, int], tuple[FloatArray, FloatArray | None, int]] = {}
         """``(i, j)``: robot j's position and target in the common frame as robot i last
         received them (coordinated exploration), and the step it received them; dropped
@@ -1828,7 +1833,7 @@ class TeamCoordinator:
             self.step_joined[k] = self.step
             self._verified_at[k] = self._poses[k][:2].copy()
             self._change_frame(k, self.frames[k])
-        self._last_refine_step = self.step
+        self._given = True
         self._rest()
         self._exchange_and_fuse(everyone=True)
 
@@ -1872,18 +1877,32 @@ class TeamCoordinator:
                     self._received[(i, j)] = maps(j)
         if (
             self.config.refine_every
+            and not self._given
             and self.step - self._last_refine_step >= self.config.refine_every
         ):
             for k in members[1:]:
                 verified = self.verified[k]
                 if not self._reach[0, k] or verified is None:
                     continue
-                refined, _, _ = refine_transform(
+                refined, psi, agreement = refine_transform(
                     maps(0), maps(k), self.frames[k], self.config.merge, rng=self.rng
                 )
-                if self._within_verified(refined, verified, self._verified_at[k]):
-                    self._change_frame(k, compose(refined, inverse(self.frames[k])))
-                    self.frames[k] = refined
+                if not self._within_verified(refined, verified, self._verified_at[k]):
+                    self._decide(
+                        f"re-refinement of robot_{k}'s transform left what the sighting "
+                        "verified; kept the transform"
+                    )
+                    continue
+                at = self._verified_at[k][None, :]
+                shift = transform_points(refined, at) - transform_points(self.frames[k], at)
+                turn = math.remainder(float(refined[2] - self.frames[k][2]), 2 * math.pi)
+                self._decide(
+                    f"robot_{k}'s transform re-refined on the grown maps: psi {psi:.3f}, "
+                    f"acceptance index {agreement.index:.3f}; the meeting place moved "
+                    f"{float(np.hypot(*shift[0])):.3f} m, turned {math.degrees(turn):+.2f}°"
+                )
+                self._change_frame(k, compose(refined, inverse(self.frames[k])))
+                self.frames[k] = refined
             self._last_refine_step = self.step
         self._fuse(maps, shared=bool(self._reach[np.ix_(members, members)].all()))
 

@@ -35,13 +35,16 @@ STARTS = ((4.0, 8.0, 0.0), (9.0, 8.3, np.pi))
 TRUE_TRANSFORM = compose(inverse(np.array(STARTS[0])), np.array(STARTS[1]))
 
 
-def verify(hypothesis: np.ndarray, steps: int = 600) -> tuple[TeamCoordinator, list[str]]:
-    """Map a little, then put ``hypothesis`` to a rendezvous; run until it is settled."""
+def verify(
+    hypothesis: np.ndarray, steps: int = 600, after: int = 0, **config: Any
+) -> tuple[TeamCoordinator, list[str]]:
+    """Map a little, then put ``hypothesis`` to a rendezvous; run until it is settled, and
+    ``after`` steps more (``config``: TeamConfig fields)."""
     env = MultiRobotSlamEnv(scenario="office", seed=0, config=EnvConfig(starts=STARTS))
     observations, _ = env.reset()
     agents = env.possible_agents
     maps = MapCache(env)
-    team = TeamCoordinator(TeamConfig(interaction=True), rng=np.random.default_rng(0))
+    team = TeamCoordinator(TeamConfig(interaction=True, **config), rng=np.random.default_rng(0))
     # The hypothesis under test is injected as if the merge had proposed it.
     team.hypotheses = [hypothesis]
     team._last_poses = [observations[a]["pose"] for a in agents]
@@ -55,6 +58,10 @@ def verify(hypothesis: np.ndarray, steps: int = 600) -> tuple[TeamCoordinator, l
         decisions += [d.text for d in team.pop_decisions()]
         if team.state is not TeamState.HYPOTHESIS_VERIFICATION:
             break
+    for _ in range(after):
+        actions = team.act([observations[a] for a in agents], maps)
+        observations, _, _, _, _ = env.step({a: actions[i] for i, a in enumerate(agents)})
+        decisions += [d.text for d in team.pop_decisions()]
     return team, decisions
 
 
@@ -67,6 +74,17 @@ def test_a_true_hypothesis_is_accepted_at_the_rendezvous_and_refined() -> None:
     error = compose(inverse(TRUE_TRANSFORM), team.transform)
     assert np.hypot(error[0], error[1]) < 0.1 and abs(error[2]) < np.radians(1.0)
     assert team.hypotheses_tested == 1 and team.step_verified is not None
+
+
+def test_the_transform_is_re_refined_on_the_grown_maps() -> None:
+    estimate = compose(TRUE_TRANSFORM, [0.08, -0.05, 0.02])
+    team, decisions = verify(estimate, after=120, refine_every=50)
+    assert team.state is TeamState.COORDINATED_EXPLORATION, decisions
+    again = [d for d in decisions if "re-refined on the grown maps" in d]
+    assert len(again) == 2, decisions  # every 50 steps after the acceptance
+    assert team.transform is not None
+    error = compose(inverse(TRUE_TRANSFORM), team.transform)
+    assert np.hypot(error[0], error[1]) < 0.1 and abs(error[2]) < np.radians(1.0)
 
 
 @pytest.mark.parametrize(
