@@ -1878,33 +1878,51 @@ class TeamCoordinator:
         if (
             self.config.refine_every
             and not self._given
+            and self.state is TeamState.COORDINATED_EXPLORATION
             and self.step - self._last_refine_step >= self.config.refine_every
         ):
-            for k in members[1:]:
-                verified = self.verified[k]
-                if not self._reach[0, k] or verified is None:
-                    continue
-                refined, psi, agreement = refine_transform(
-                    maps(0), maps(k), self.frames[k], self.config.merge, rng=self.rng
-                )
-                if not self._within_verified(refined, verified, self._verified_at[k]):
-                    self._decide(
-                        f"re-refinement of robot_{k}'s transform left what the sighting "
-                        "verified; kept the transform"
-                    )
-                    continue
-                at = self._verified_at[k][None, :]
-                shift = transform_points(refined, at) - transform_points(self.frames[k], at)
-                turn = math.remainder(float(refined[2] - self.frames[k][2]), 2 * math.pi)
-                self._decide(
-                    f"robot_{k}'s transform re-refined on the grown maps: psi {psi:.3f}, "
-                    f"acceptance index {agreement.index:.3f}; the meeting place moved "
-                    f"{float(np.hypot(*shift[0])):.3f} m, turned {math.degrees(turn):+.2f}°"
-                )
-                self._change_frame(k, compose(refined, inverse(self.frames[k])))
-                self.frames[k] = refined
+            self._refine_again(maps)
             self._last_refine_step = self.step
         self._fuse(maps, shared=bool(self._reach[np.ix_(members, members)].all()))
+
+    def _refine_again(self, maps: MapSource) -> None:
+        """The common frame's transforms refined again on the grown maps
+        (``TeamConfig.refine_every``), each kept only within the rendezvous tolerances
+        of what was verified for it: a group of three or more jointly
+        (:meth:`_refine_group`, when every member can reach every other), else each
+        member against robot 0's map."""
+        members = self.members
+        if len(members) >= 3 and self.config.joint is not None:
+            if self._reach[np.ix_(members, members)].all():
+                before = {k: self.frames[k] for k in members[1:]}
+                self._refine_group(0)
+                for k, old in before.items():
+                    if self.frames[k] is not old:
+                        self._change_frame(k, compose(self.frames[k], inverse(old)))
+            return
+        for k in members[1:]:
+            verified = self.verified[k]
+            if not self._reach[0, k] or verified is None:
+                continue
+            refined, psi, agreement = refine_transform(
+                maps(0), maps(k), self.frames[k], self.config.merge, rng=self.rng
+            )
+            if not self._within_verified(refined, verified, self._verified_at[k]):
+                self._decide(
+                    f"re-refinement of robot_{k}'s transform left what the sighting "
+                    "verified; kept the transform"
+                )
+                continue
+            at = self._verified_at[k][None, :]
+            shift = transform_points(refined, at) - transform_points(self.frames[k], at)
+            turn = math.remainder(float(refined[2] - self.frames[k][2]), 2 * math.pi)
+            self._decide(
+                f"robot_{k}'s transform re-refined on the grown maps: psi {psi:.3f}, "
+                f"acceptance index {agreement.index:.3f}; the meeting place moved "
+                f"{float(np.hypot(*shift[0])):.3f} m, turned {math.degrees(turn):+.2f}°"
+            )
+            self._change_frame(k, compose(refined, inverse(self.frames[k])))
+            self.frames[k] = refined
 
     def _fuse(self, maps: MapSource, *, shared: bool) -> None:
         """Refresh the views of the robots of the common frame: each robot's own map,

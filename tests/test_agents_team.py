@@ -78,11 +78,16 @@ def test_a_true_hypothesis_is_accepted_at_the_rendezvous_and_refined() -> None:
 
 def test_the_transform_is_re_refined_on_the_grown_maps() -> None:
     estimate = compose(TRUE_TRANSFORM, [0.08, -0.05, 0.02])
+    accepted, _ = verify(estimate)
+    assert accepted.transform is not None
+    at_acceptance = accepted.transform.copy()
     team, decisions = verify(estimate, after=120, refine_every=50)
     assert team.state is TeamState.COORDINATED_EXPLORATION, decisions
-    again = [d for d in decisions if "re-refined on the grown maps" in d]
-    assert len(again) == 2, decisions  # every 50 steps after the acceptance
+    kept = [d for d in decisions if "re-refined on the grown maps" in d]
+    dropped = [d for d in decisions if "re-refinement of robot_1" in d]
+    assert len(kept) + len(dropped) == 2 and kept, decisions  # every 50 steps
     assert team.transform is not None
+    assert not np.allclose(team.transform, at_acceptance, atol=1e-4)
     error = compose(inverse(TRUE_TRANSFORM), team.transform)
     assert np.hypot(error[0], error[1]) < 0.1 and abs(error[2]) < np.radians(1.0)
 

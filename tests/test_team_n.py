@@ -147,6 +147,44 @@ def test_a_group_of_three_is_refined_jointly_not_chained() -> None:
         assert np.allclose(team.policies[k].frames[-1], team.frames[k])  # type: ignore[attr-defined]
 
 
+def test_a_group_of_three_is_refined_again_jointly_on_the_grown_maps() -> None:
+    own, truth = corridor_maps()
+    team = TeamCoordinator(
+        TeamConfig(refine_every=10),
+        rng=np.random.default_rng(0),
+        n_robots=3,
+        policy_factory=lambda e, r: _Recorder(),
+    )
+    team._maps = lambda i: own[i]
+    team._set_pair(1, 2)
+    team._join(
+        compose(inverse(truth[1]), truth[2]), compose(inverse(truth[1]), truth[2]), np.zeros(2)
+    )
+    team._set_pair(0, 1)
+    team._join(truth[1], truth[1], np.zeros(2))
+    team._rest()
+    team._reach[:] = True
+    # The transforms as a join on smaller maps might have left them, within what the
+    # rendezvous verified.
+    off = np.array([0.1, -0.06, np.radians(1.0)])
+    for k in (1, 2):
+        team._change_frame(k, compose(compose(team.frames[k], off), inverse(team.frames[k])))
+        team.frames[k] = compose(team.frames[k], off)
+    team.pop_decisions()
+    team.step += 10
+    team._keep_merged_map(team._maps)
+    decisions = [d.text for d in team.pop_decisions()]
+    assert any("refined jointly on 3 overlapping pairs" in d for d in decisions), decisions
+    for k in (1, 2):
+        error = compose(inverse(truth[k]), team.frames[k])
+        assert np.hypot(*error[:2]) < 0.05 and abs(error[2]) < np.radians(0.5), k
+        # The policy was told every move of its frame: together, the refined place.
+        told = np.zeros(3)
+        for change in team.policies[k].frames:  # type: ignore[attr-defined]
+            told = compose(change, told)
+        assert np.allclose(told, team.frames[k], atol=1e-9), k
+
+
 def test_the_common_frame_shares_one_map_and_every_teammate() -> None:
     team = _team_of_three()
     cells = np.full((60, 100), FREE, dtype=np.int8)
