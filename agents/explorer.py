@@ -25,7 +25,7 @@ from __future__ import annotations
 import functools
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numba
@@ -933,18 +933,19 @@ class ExplorerPolicy:
             return
         empty_replans = self._empty_replans
         self._plan_to_frontier(grid, cost_grid, start, reachable, pose, plain)
-        if self._target is not None or self.status == "waiting" or plain is None or plain is grid:
+        if self._target is not None or self.status == "waiting" or plain is None:
             return
-        if not self._close_returns and not len(self._teammates):
-            return  # nothing to leave out: the plan on the map itself was this one
-        # Only the map ends exploration: known teammates and remembered close returns
-        # shape the paths, but a frontier they cut off (a teammate in the doorway, a jamb's
-        # close returns closing a narrow door) is still to be explored: plan without them,
-        # the follower's scan guard keeping the robot off them. Robots only sighted (before
-        # a merge) stay in the way: :meth:`_path_blocked` refuses a path through them.
+        # Only the map ends exploration: known teammates, remembered close returns and the
+        # planner's safety margin shape the paths, but a frontier they cut off (a teammate
+        # in the doorway, a jamb's close returns closing a narrow door, a ragged wall's
+        # margin leaving the robot on an island of the cost grid) is still to be explored:
+        # plan without them, on the robot's bare footprint, the follower's scan guard
+        # keeping the robot off walls and teammates. Robots only sighted (before a merge)
+        # stay in the way: :meth:`_path_blocked` refuses a path through them.
         lenient = self._planning_grid(plain, robots_too=not len(self._teammates), returns_too=False)
         self._empty_replans = empty_replans
-        cost_grid = inflate(lenient, config.planner)  # fewer obstacles: cannot raise here
+        bare = replace(config.planner, safety_margin=0.0)
+        cost_grid = inflate(lenient, bare)  # fewer obstacles: cannot raise here
         start, reachable = reachable_cells(cost_grid, pose, snap_distance=config.start_snap)
         self._plan_to_frontier(lenient, cost_grid, start, reachable, pose, plain)
 

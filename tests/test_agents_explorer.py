@@ -440,21 +440,36 @@ def _blocked_at_the_inner_door(blocker: str) -> ExplorerPolicy:
     policy = ExplorerPolicy(np.random.default_rng(0))
     if blocker == "teammate":
         policy.set_teammates(np.array([[4.0, 2.5]]))  # standing in the inner door
-    else:  # a jamb seen from a few cm, the returns a little off, across the door
+    elif blocker == "close_returns":  # a jamb seen from a few cm, a little off, across
         across = np.column_stack([np.full(11, 4.0), np.linspace(2.0, 3.0, 11)])
         policy._close_returns.append((0, across))
     return policy
 
 
-@pytest.mark.parametrize("blocker", ["teammate", "close_returns"])
-def test_a_frontier_cut_off_only_by_a_teammate_or_close_returns_is_explored(blocker: str) -> None:
-    # The only frontier left (the east doorway) lies beyond the inner door, which a
-    # teammate standing in it, or the robot's remembered close returns, close in the
-    # planning grid. Regression (planner_test seed 2, team): after the rendezvous both
-    # robots found no frontier so, reported done and ended the run at 75 % coverage.
-    # Only the map ends exploration: the robot plans to the doorway on the map itself.
+def _inner_door(blocker: str) -> GridMap:
+    """Two rooms, the west doorway closed; with ``blocker == "margin"`` the inner door
+    narrowed to 0.5 m: wider than the robot (0.4 m), narrower than its footprint with
+    the planner's safety margin (0.56 m)."""
     grid = two_rooms()
     grid.cells[40:60, 20] = OCCUPIED  # close the west doorway
+    if blocker == "margin":
+        grid.cells[40:45, 80] = OCCUPIED
+        grid.cells[55:60, 80] = OCCUPIED
+    return grid
+
+
+@pytest.mark.parametrize("blocker", ["teammate", "close_returns", "margin"])
+def test_a_frontier_cut_off_by_a_teammate_close_returns_or_the_margin_is_explored(
+    blocker: str,
+) -> None:
+    # The only frontier left (the east doorway) lies beyond the inner door, which a
+    # teammate standing in it, the robot's remembered close returns, or the planner's
+    # safety margin close in the planning grid. Regression (planner_test seed 2, team):
+    # after the rendezvous both robots found no frontier so, reported done and ended the
+    # run at 75 % coverage; (planner_test seed 3, one robot) a ragged wall's margin left
+    # the robot on a one-cell island of the cost grid: done at 14 %. Only the map ends
+    # exploration: the robot plans to the doorway on the map itself, on its bare footprint.
+    grid = _inner_door(blocker)
     pose = {"pose": np.array([2.0, 2.5, 0.0])}
     policy = _blocked_at_the_inner_door(blocker)
     for _ in range(policy.config.done_after + 1):
