@@ -944,11 +944,7 @@ class ExplorerPolicy:
         # stay in the way: :meth:`_path_blocked` refuses a path through them.
         lenient = self._planning_grid(plain, robots_too=not len(self._teammates), returns_too=False)
         self._empty_replans = empty_replans
-        # Half a cell, not 0: the cost grid blocks cells nearer than the radius plus the
-        # margin, :meth:`_path_blocked` cells within the radius; with no margin a cell
-        # exactly one radius from a wall would pass the one and fail the other.
-        margin = min(config.planner.safety_margin, 0.5 * grid.resolution)
-        bare = replace(config.planner, safety_margin=margin)
+        bare = replace(config.planner, safety_margin=0.0)
         cost_grid = inflate(lenient, bare)  # fewer obstacles: cannot raise here
         start, reachable = reachable_cells(cost_grid, pose, snap_distance=config.start_snap)
         self._plan_to_frontier(lenient, cost_grid, start, reachable, pose, plain)

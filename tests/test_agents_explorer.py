@@ -487,22 +487,6 @@ def test_a_frontier_cut_off_by_a_teammate_close_returns_or_the_margin_is_explore
     assert policy.status == "done"
 
 
-def test_a_gap_narrower_than_the_robot_is_not_planned_through() -> None:
-    # The fallback's bare footprint keeps half a cell of margin: a 0.35 m door (the robot
-    # is 0.4 m across) stays closed, and the robot reports done instead of planning
-    # through it and replanning on every step as the path check refuses the plan.
-    grid = two_rooms()
-    grid.cells[40:60, 20] = OCCUPIED  # close the west doorway
-    grid.cells[40:47, 80] = OCCUPIED
-    grid.cells[54:60, 80] = OCCUPIED  # the inner door 0.35 m wide
-    pose = {"pose": np.array([2.0, 2.5, 0.0])}
-    policy = ExplorerPolicy(np.random.default_rng(0))
-    for _ in range(policy.config.done_after):
-        policy.act(pose, grid)
-    assert policy.status == "done" and policy.target is None
-    assert policy.replans == policy.config.done_after
-
-
 def test_a_robot_only_sighted_in_the_doorway_is_not_planned_through() -> None:
     # Before a merge a robot the peer sensor sees stays in the way (the path check would
     # refuse a path through it on the next step): no plan through the door it stands in,
