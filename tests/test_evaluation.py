@@ -133,7 +133,8 @@ def test_coverage_counts_only_the_free_space_the_robots_can_reach() -> None:
 
 def test_coverage_counts_only_the_floor_behind_passages_the_planner_uses() -> None:
     # Two rooms joined by a 0.5 m gap: a robot of radius 0.2 fits, but the planner keeps
-    # its safety margin clear and never plans through it. The second room's floor counts
+    # its safety margin clear and plans through it only as a last resort (the explorer's
+    # bare-footprint fallback), so coverage leaves it out. The second room's floor counts
     # only for a strip past the gap; with a 1 m door, all of it.
     counted = {}
     for gap in (0.5, 1.0):

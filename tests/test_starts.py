@@ -112,7 +112,8 @@ def test_start_cells_reach_nothing_from_a_wall_or_off_the_raster() -> None:
 @pytest.mark.parametrize(("gap", "joined"), [(0.3, False), (0.5, False), (1.0, True)])
 def test_only_passages_the_planner_can_use_join_the_regions(gap: float, joined: bool) -> None:
     # Two rooms joined by a gap in a wall. A robot of radius 0.2 squeezes through 0.5 m,
-    # but the planner keeps its safety margin clear and never plans through it: the
+    # but the planner keeps its safety margin clear and plans through it only as a last
+    # resort (the explorer's bare-footprint fallback): the
     # starts stay in the first room. A 1 m doorway joins the rooms.
     low, high = 1.3 - gap / 2, 1.3 + gap / 2
     world = enclosure(

@@ -52,8 +52,9 @@ START_MARGIN = 0.3
 PASSAGE_MARGIN = 0.1
 """Clearance estimate beyond the robot radius that the passages between starts need, m:
 the planner keeps ``PlannerConfig.safety_margin`` (0.08 m) beyond the radius clear, so a
-gap a robot fits through by less is one it never plans through (``planner_test``: robot
-0's start room joins the rest only through gaps 0.20-0.24 m beyond the centre line)."""
+gap a robot fits through by less is one it does not plan through while anything else is
+left (only the explorer's last-resort plan, on the bare footprint, takes it; ``planner_test``:
+robot 0's start room joins the rest only through gaps 0.20-0.24 m beyond the centre line)."""
 
 START_RESOLUTION = 0.1
 """Cell size of the raster on which starts in a :class:`WorldSpec` are chosen, m."""
