@@ -230,8 +230,9 @@ class TeamConfig:
     they are dropped (they mislead the split of the frontiers more than they help)."""
     refine_every: int = 400
     """Steps between re-refinements of the transform on the grown maps while the link is
-    up (0: never). The maps at verification can overlap too little to fix the heading
-    well; the grown maps overlap more. A re-refinement that leaves the rendezvous
+    up (0: never); one that falls due with the link down runs as soon as it is back. The
+    maps at verification can overlap too little to fix the heading well; the grown maps
+    overlap more. A re-refinement that leaves the rendezvous
     tolerances of the verified hypothesis is not kept; given transforms
     (:meth:`TeamCoordinator.start_coordinated`) are never re-refined
     (docs/decisions.md)."""
@@ -1880,30 +1881,35 @@ class TeamCoordinator:
             and not self._given
             and self.state is TeamState.COORDINATED_EXPLORATION
             and self.step - self._last_refine_step >= self.config.refine_every
+            and self._refine_again(maps)
         ):
-            self._refine_again(maps)
             self._last_refine_step = self.step
         self._fuse(maps, shared=bool(self._reach[np.ix_(members, members)].all()))
 
-    def _refine_again(self, maps: MapSource) -> None:
+    def _refine_again(self, maps: MapSource) -> bool:
         """The common frame's transforms refined again on the grown maps
         (``TeamConfig.refine_every``), each kept only within the rendezvous tolerances
         of what was verified for it: a group of three or more jointly
-        (:meth:`_refine_group`, when every member can reach every other), else each
-        member against robot 0's map."""
+        (:meth:`_refine_group`, once every member can reach every other), else each
+        member robot 0 can reach against robot 0's map. False when nothing could be
+        refined for want of the link: the caller tries again at its next tick instead of
+        a whole period later."""
         members = self.members
         if len(members) >= 3 and self.config.joint is not None:
-            if self._reach[np.ix_(members, members)].all():
-                before = {k: self.frames[k] for k in members[1:]}
-                self._refine_group(0)
-                for k, old in before.items():
-                    if self.frames[k] is not old:
-                        self._change_frame(k, compose(self.frames[k], inverse(old)))
-            return
+            if not self._reach[np.ix_(members, members)].all():
+                return False
+            before = {k: self.frames[k] for k in members[1:]}
+            self._refine_group(0)
+            for k, old in before.items():
+                if self.frames[k] is not old:
+                    self._change_frame(k, compose(self.frames[k], inverse(old)))
+            return True
+        refined_any = False
         for k in members[1:]:
             verified = self.verified[k]
             if not self._reach[0, k] or verified is None:
                 continue
+            refined_any = True
             refined, psi, agreement = refine_transform(
                 maps(0), maps(k), self.frames[k], self.config.merge, rng=self.rng
             )
@@ -1923,6 +1929,7 @@ class TeamCoordinator:
             )
             self._change_frame(k, compose(refined, inverse(self.frames[k])))
             self.frames[k] = refined
+        return refined_any
 
     def _fuse(self, maps: MapSource, *, shared: bool) -> None:
         """Refresh the views of the robots of the common frame: each robot's own map,

@@ -12,6 +12,7 @@ import pytest
 
 from agents.team import (
     UNSEEN_STEPS,
+    Decision,
     TeamConfig,
     TeamCoordinator,
     TeamState,
@@ -36,10 +37,15 @@ TRUE_TRANSFORM = compose(inverse(np.array(STARTS[0])), np.array(STARTS[1]))
 
 
 def verify(
-    hypothesis: np.ndarray, steps: int = 600, after: int = 0, **config: Any
-) -> tuple[TeamCoordinator, list[str]]:
+    hypothesis: np.ndarray,
+    steps: int = 600,
+    after: int = 0,
+    silent: range = range(0),
+    **config: Any,
+) -> tuple[TeamCoordinator, list[Decision]]:
     """Map a little, then put ``hypothesis`` to a rendezvous; run until it is settled, and
-    ``after`` steps more (``config``: TeamConfig fields)."""
+    ``after`` steps more, the link down in the ``silent`` ones of those (``config``:
+    TeamConfig fields)."""
     env = MultiRobotSlamEnv(scenario="office", seed=0, config=EnvConfig(starts=STARTS))
     observations, _ = env.reset()
     agents = env.possible_agents
@@ -51,23 +57,31 @@ def verify(
     team._retry_area = {(0, 1): np.inf}  # no new merge attempt during the test
     team._start_rendezvous(0, maps)
     assert team.state is TeamState.HYPOTHESIS_VERIFICATION
-    decisions: list[str] = []
+    decisions: list[Decision] = []
     for _ in range(steps):
         actions = team.act([observations[a] for a in agents], maps)
         observations, _, _, _, _ = env.step({a: actions[i] for i, a in enumerate(agents)})
-        decisions += [d.text for d in team.pop_decisions()]
+        decisions += team.pop_decisions()
         if team.state is not TeamState.HYPOTHESIS_VERIFICATION:
             break
-    for _ in range(after):
-        actions = team.act([observations[a] for a in agents], maps)
+    for k in range(after):
+        seen = [observations[a] for a in agents]
+        if k in silent:
+            seen = [{**o, "comm": np.zeros_like(o["comm"])} for o in seen]
+        actions = team.act(seen, maps)
         observations, _, _, _, _ = env.step({a: actions[i] for i, a in enumerate(agents)})
-        decisions += [d.text for d in team.pop_decisions()]
+        decisions += team.pop_decisions()
     return team, decisions
+
+
+def texts(decisions: list[Decision]) -> list[str]:
+    return [d.text for d in decisions]
 
 
 def test_a_true_hypothesis_is_accepted_at_the_rendezvous_and_refined() -> None:
     estimate = compose(TRUE_TRANSFORM, [0.08, -0.05, 0.02])  # a merge's small error
-    team, decisions = verify(estimate)
+    team, found = verify(estimate)
+    decisions = texts(found)
     assert team.state is TeamState.COORDINATED_EXPLORATION, decisions
     assert any("accepted" in text for text in decisions)
     assert team.transform is not None and team.merged_map is not None
@@ -81,15 +95,37 @@ def test_the_transform_is_re_refined_on_the_grown_maps() -> None:
     accepted, _ = verify(estimate)
     assert accepted.transform is not None
     at_acceptance = accepted.transform.copy()
-    team, decisions = verify(estimate, after=120, refine_every=50)
+    team, found = verify(estimate, after=120, refine_every=50)
+    decisions = texts(found)
     assert team.state is TeamState.COORDINATED_EXPLORATION, decisions
-    kept = [d for d in decisions if "re-refined on the grown maps" in d]
-    dropped = [d for d in decisions if "re-refinement of robot_1" in d]
-    assert len(kept) + len(dropped) == 2 and kept, decisions  # every 50 steps
+    assert len(re_refinements(found)) == 2 and any(
+        "re-refined on the grown maps" in d for d in decisions
+    ), decisions  # every 50 steps
     assert team.transform is not None
     assert not np.allclose(team.transform, at_acceptance, atol=1e-4)
     error = compose(inverse(TRUE_TRANSFORM), team.transform)
     assert np.hypot(error[0], error[1]) < 0.1 and abs(error[2]) < np.radians(1.0)
+
+
+def re_refinements(decisions: list[Decision]) -> list[Decision]:
+    """The re-refinements on the grown maps, kept or not."""
+    return [
+        d
+        for d in decisions
+        if "re-refined on the grown maps" in d.text or "re-refinement of robot_1" in d.text
+    ]
+
+
+def test_a_re_refinement_missed_for_the_link_runs_as_soon_as_it_is_back() -> None:
+    # Due 50 steps after the acceptance, with the link down until 80 steps after it: the
+    # re-refinement comes at the first tick with the link back, not a period later.
+    estimate = compose(TRUE_TRANSFORM, [0.08, -0.05, 0.02])
+    team, found = verify(estimate, after=100, silent=range(80), refine_every=50)
+    assert team.state is TeamState.COORDINATED_EXPLORATION, texts(found)
+    accepted = next(d.step for d in found if "refined by random walk" in d.text)
+    steps = [d.step - accepted for d in re_refinements(found)]
+    merged_map_every = TeamConfig().merged_map_every
+    assert len(steps) == 1 and 80 < steps[0] <= 80 + merged_map_every + 1, texts(found)
 
 
 @pytest.mark.parametrize(
@@ -98,7 +134,8 @@ def test_the_transform_is_re_refined_on_the_grown_maps() -> None:
     ids=["shifted-1.5m", "turned-90deg"],
 )
 def test_a_wrong_hypothesis_is_rejected_at_the_rendezvous(wrong: list[float]) -> None:
-    team, decisions = verify(compose(TRUE_TRANSFORM, wrong))
+    team, found = verify(compose(TRUE_TRANSFORM, wrong))
+    decisions = texts(found)
     assert team.state is TeamState.NO_INTERACTION, decisions
     assert team.transform is None and team.merged_map is None
     assert any("rejected" in text for text in decisions), decisions
