@@ -78,6 +78,15 @@ def texts(decisions: list[Decision]) -> list[str]:
     return [d.text for d in decisions]
 
 
+def re_refinements(decisions: list[Decision]) -> list[Decision]:
+    """The re-refinements on the grown maps, kept or not."""
+    return [
+        d
+        for d in decisions
+        if "re-refined on the grown maps" in d.text or "re-refinement of robot_1" in d.text
+    ]
+
+
 def test_a_true_hypothesis_is_accepted_at_the_rendezvous_and_refined() -> None:
     estimate = compose(TRUE_TRANSFORM, [0.08, -0.05, 0.02])  # a merge's small error
     team, found = verify(estimate)
@@ -105,15 +114,6 @@ def test_the_transform_is_re_refined_on_the_grown_maps() -> None:
     assert not np.allclose(team.transform, at_acceptance, atol=1e-4)
     error = compose(inverse(TRUE_TRANSFORM), team.transform)
     assert np.hypot(error[0], error[1]) < 0.1 and abs(error[2]) < np.radians(1.0)
-
-
-def re_refinements(decisions: list[Decision]) -> list[Decision]:
-    """The re-refinements on the grown maps, kept or not."""
-    return [
-        d
-        for d in decisions
-        if "re-refined on the grown maps" in d.text or "re-refinement of robot_1" in d.text
-    ]
 
 
 def test_a_re_refinement_missed_for_the_link_runs_as_soon_as_it_is_back() -> None:
