@@ -312,10 +312,9 @@ def settled(
     ``pivot``, m2's known centre, within ``settle_distance`` of where the best puts it,
     turned by any angle), and it misses at least ``settle_ratio`` times the best's share
     of walls (:attr:`~mrslam_env.merge.dissimilarity.WallMatch.missed`: each map's wall
-    cells with no wall of the other within one cell, the worse of the two maps). A rival
-    that scores more than the best at the working resolution is the best that
-    :func:`switching_rival` replaced; it is settled from ``switch_ratio`` times the best's
-    share, the comparison that made the switch.
+    cells with no wall of the other within one cell, the worse of the two maps). The same
+    ratio decides a switch (:func:`switching_rival`), so a best that replaced the rival
+    it outscored is settled against it by the comparison that made the switch.
 
     At the working resolution (0.1 m or coarser) a placement turned by 90° in a
     near-symmetric arena keeps its walls within the two-cell tolerance of the other
@@ -336,10 +335,7 @@ def settled(
         return False
     if not same_part(best, rival, pivot, config):
         return False
-    # a rival that outscores the best is the best it replaced (switching_rival): the
-    # comparison that made the switch settles it
-    ratio = config.switch_ratio if rival.score > best.score else config.settle_ratio
-    return rival.fine_walls.missed >= ratio * best.fine_walls.missed
+    return rival.fine_walls.missed >= config.settle_ratio * best.fine_walls.missed
 
 
 def switching_rival(
@@ -348,15 +344,16 @@ def switching_rival(
     """The rival that takes the best's place (``scored[0]``), or None: the mirror of
     :func:`settled`. Of the best's :func:`ambiguous_rivals` that were re-judged at the
     input resolution and place the same part of the maps (:func:`same_part`), the one
-    missing the smallest share of walls, when the best misses at least ``switch_ratio``
+    missing the smallest share of walls, when the best misses at least ``settle_ratio``
     times that share (:attr:`~mrslam_env.merge.dissimilarity.WallMatch.missed`).
 
     In a near-symmetric arena the placement turned by 180° about the same centre may
     score best at the working resolution while the truth is its rival; at the input
     resolution the truth lays the walls of both maps on each other and the turned
     placement does not. The switched rival is then judged by every rule like any best
-    (its own rivals, coverage, small overlap). ``switch_ratio`` chosen on and confirmed
-    on: docs/decisions.md, "Rival switching".
+    (its own rivals, coverage, small overlap). The ratio is :func:`settled`'s, one value
+    both ways (docs/decisions.md, "Rival switching": 1.5 of its own until a held-out
+    mirrored wing switched to at 2.7 gave a wrong answer).
     """
     best = scored[0]
     if best.fine_walls is None:
@@ -367,7 +364,7 @@ def switching_rival(
         walls = rival.fine_walls
         if walls is None or not same_part(best, rival, pivot, config):
             continue
-        if best.fine_walls.missed < config.switch_ratio * walls.missed:
+        if best.fine_walls.missed < config.settle_ratio * walls.missed:
             continue
         if walls.missed < chosen_missed:
             chosen, chosen_missed = rival, walls.missed

@@ -262,22 +262,20 @@ class MergeConfig:
     merges the `tb3_sandbox` pairs (a near-symmetric arena) that the ambiguity ratio
     refuses (docs/decisions.md, "Ambiguity settled at the input resolution")."""
     settle_ratio: float = 5.0
-    """How many times the best's share of missed walls
-    (:attr:`~mrslam_env.merge.dissimilarity.WallMatch.missed`) a rival must miss, at the
-    input resolution, to be settled (docs/decisions.md, "Ambiguity settled at the input
-    resolution")."""
+    """One ratio, both ways: of two placements of the same part of the maps re-judged at
+    the input resolution, the one missing the smaller share of walls
+    (:attr:`~mrslam_env.merge.dissimilarity.WallMatch.missed`) wins only when the other
+    misses at least this many times its share. A rival that does is settled; a rival that
+    the *best* misses this many times more than takes the best's place
+    (:func:`~mrslam_env.merge.decide.switching_rival`) and is then judged by every rule
+    like any best. Otherwise the answer stays ambiguous (docs/decisions.md, "Ambiguity
+    settled at the input resolution" and "Rival switching")."""
     settle_distance: float = 2.0
     """Only a rival that places the same part of the maps can be settled: it puts m2's
     known centre within this distance (m) of where the best puts it (turned by any
     angle). Walls at the input resolution compare two placements of the same overlap;
     a placement of another part (the mirrored wing, the next aisle) explains its own
     overlap and may fit as well as the truth (docs/decisions.md)."""
-    switch_ratio: float = 1.5
-    """The mirror of ``settle_ratio``: when the settling re-judges the best and a rival that
-    places the same part of the maps (``settle_distance``) and the *best* misses at least
-    this many times the rival's share of walls at the input resolution, the rival takes
-    the best's place (:func:`~mrslam_env.merge.decide.switching_rival`); every rule then
-    applies to it as to any best (docs/decisions.md, "Rival switching")."""
     twin_rival: bool = True
     """With a confident best candidate, its mirrored twin (m2 turned by 180° about its known
     centre, which lands where the best puts it; :func:`twin_proposal`) is refined and
@@ -349,10 +347,9 @@ class MergeConfig:
         require(name, "max_resolution_ratio", ratio, ratio >= 1.0, ">= 1")
         require(name, "cascade", self.cascade, isinstance(self.cascade, bool), "a bool")
         require(name, "settle", self.settle, isinstance(self.settle, bool), "a bool")
-        switch = self.switch_ratio
-        number = isinstance(switch, int | float) and not isinstance(switch, bool)
-        ok = number and switch > 1.0  # inf: never switch; NaN fails
-        require(name, "switch_ratio", switch, ok, "a number > 1 (inf: never switch)")
+        # both ways (settle and switch): a ratio of 1 or less would let two placements
+        # take each other's place for ever
+        require(name, "settle_ratio", self.settle_ratio, self.settle_ratio > 1.0, "> 1")
         twin = self.twin_rival
         require(name, "twin_rival", twin, isinstance(twin, bool), "a bool")
         clean = self.clean_conflict_length
@@ -962,7 +959,7 @@ def _settle(
     (:func:`~mrslam_env.merge.dissimilarity.wall_match`); the candidates come back with
     :attr:`ScoredHypothesis.fine_walls` set on those, for
     :func:`~mrslam_env.merge.decide.settled`. When a rival then takes the best's place
-    (:func:`~mrslam_env.merge.decide.switching_rival`, ``switch_ratio``), it is moved to
+    (:func:`~mrslam_env.merge.decide.switching_rival`, ``settle_ratio``), it is moved to
     the front and its own rivals are settled the same way (a rival misses strictly fewer
     walls than the best it replaces, so this ends). Otherwise (no rival, or a rival
     placing another part of the maps, ``settle_distance`` or more away, which is never
