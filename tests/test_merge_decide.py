@@ -387,6 +387,18 @@ def test_a_best_covering_too_little_is_refused_whoever_proposed_it(source: str) 
     assert _refused_by(candidates) == ("rule_covers_enough", f"no confident merge: {why}")
 
 
+def test_the_floor_alone_stands_between_a_confident_fit_covering_little_and_a_merge() -> None:
+    # Far from every other threshold: 20 m² of overlap (min_merge_area 6, small_overlap_area
+    # 8), psi 0.3 cells (small_overlap_max_psi 0.6), no conflict and no rival. Only the
+    # coverage floor (8 % < 20 %) refuses it; without the floor it is the answer. The
+    # end-to-end pair of test_merge_proposals.py is too close to other thresholds to say
+    # this (issue 36).
+    best = _covering(0.08)
+    assert _refused_by(_candidates(best))[0] == "rule_covers_enough"
+    loose = decide(_candidates(best), replace(CONFIG, min_overlap_fraction=0.0))
+    assert loose.chosen is best
+
+
 def test_a_best_covering_enough_passes() -> None:
     assert rule_covers_enough(_candidates(_covering(0.2)), CONFIG) is None
     # A confident rival that is the same answer changes nothing: the best is judged.

@@ -13,6 +13,7 @@ uses it.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import replace
 
@@ -218,23 +219,30 @@ def test_merge_finds_through_the_hough_source_what_the_others_miss(
     assert off.transform is None and "hypotheses.hough" not in off.seconds
 
 
-def test_a_fit_covering_little_of_the_smaller_map_is_refused() -> None:
-    # 7 m apart in the procedural building: the best confident placement is a 180° wrong
-    # fit covering 15 % of the smaller map (the true one has too many conflicts). The wall
-    # correlation proposes it, and depending on the working grid the virtual robot too:
-    # the rule judges the placement, not who proposed it.
-    m1, m2 = map_pair("procedural-1", (5, 5), (12, 6), TRUTH, seed=1, scans=8)
+@functools.cache
+def _procedural_pair() -> tuple[GridMap, GridMap]:
+    return map_pair("procedural-1", (5, 5), (12, 6), TRUTH, seed=1, scans=8)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_fit_covering_little_of_the_smaller_map_is_refused(seed: int) -> None:
+    # 7 m apart in the procedural building: the best confident placement is a wrong fit
+    # covering 8-15 % of the smaller map (the true one has too many conflicts). Which
+    # source proposes it (the virtual robot, the wall correlation, Hough) changes with the
+    # seed and the working grid: the rule judges the placement, not who proposed it. On
+    # MCL seeds 0-5, cropped or not, the best covered at most 15 %, under the 20 % floor
+    # by a margin. Whether the pair would be merged without the floor is not asked here:
+    # that hangs on a rival a few conflicts from confident (issue 36, a knife edge); the
+    # decision itself is tested on hand-made candidates in test_merge_decide.py.
+    m1, m2 = _procedural_pair()
     for crop in (True, False):
-        result = merge_maps(m1, m2, MergeConfig(crop_to_known=crop), rng=0)
+        result = merge_maps(m1, m2, MergeConfig(crop_to_known=crop), rng=seed)
         assert result.transform is None
         assert "of the smaller map (< 20%)" in result.reason, result.reason
         best = result.hypotheses[0]
-        assert best.confident and best.overlap < 0.2
+        assert best.confident and best.agreement.overlap_fraction < 0.17
         moved, _ = relative_transform_error(best.map1_from_map2, TRUTH, known_centroid(m2))
         assert moved > 1.0  # it was indeed wrong
-    # Without the rule it would have been merged.
-    loose = merge_maps(m1, m2, MergeConfig(min_overlap_fraction=0.0), rng=0)
-    assert loose.transform is not None
 
 
 # -- configuration ----------------------------------------------------------------------------

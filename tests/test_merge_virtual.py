@@ -90,6 +90,32 @@ def test_scan_rules_wall_unknown_edge_and_no_return():
         simulate_scan(grid, pose, np.array([0.0]), 0.0)
 
 
+@pytest.mark.parametrize("quadrant", range(4))
+def test_a_beam_through_cell_corners_does_not_turn_on_the_last_bit_of_its_angle(quadrant):
+    # Issue 36: the virtual robot drives from cell centres along diagonals, so its beams at
+    # multiples of 45 degrees pass exactly through cell corners. At the first corner one
+    # neighbour is UNKNOWN (entering it makes the beam invalid) and the other FREE; a wall
+    # lies further along the diagonal. Which neighbour the beam enters must not depend on
+    # the last bit of its angle (np.arctan2 and cos/sin differ by an ulp between CPUs).
+    cells = np.full((10, 10), FREE, dtype=np.int8)
+    cells[0, 1] = UNKNOWN  # the x neighbour at the first corner
+    cells[5, 5] = OCCUPIED  # entered through the corner (0, 0)
+    # np.rot90 turns the grid by -90 degrees in the map frame (rows are y): the same beam
+    # turned with it meets the same cells, the UNKNOWN one now beside it in x or in y.
+    grid = GridMap(cells=np.rot90(cells, quadrant).copy(), resolution=0.1, origin=(-0.5, -0.5))
+    turn = -quadrant * math.pi / 2
+    c, s = math.cos(turn), math.sin(turn)
+    start = np.round([-0.45 * (c - s), -0.45 * (s + c)], 12)  # a cell centre
+    diagonal = float(wrap_angle(math.pi / 4 + turn))
+    angles = np.array([np.nextafter(diagonal, -4.0), diagonal, np.nextafter(diagonal, 4.0)])
+    ranges = simulate_scan(grid, np.array([start[0], start[1], 0.0]), angles, 2.0)
+    # A corner counts as crossed in y first (virtual._CORNER_TIE), so all three beams agree.
+    if quadrant % 2 == 0:  # the y neighbour is FREE: every beam meets the wall at (0, 0)
+        np.testing.assert_allclose(ranges, 0.45 * math.sqrt(2.0), rtol=0, atol=1e-9)
+    else:  # the y neighbour is the UNKNOWN cell
+        assert np.isnan(ranges).all()
+
+
 @pytest.fixture(scope="module")
 def office_map():
     m1, _ = map_pair("office", (5, 4), (9, 4), np.array([1.0, 2.0, 1.2]))

@@ -45,6 +45,11 @@ __all__ = [
 ]
 
 
+_CORNER_TIE = 1e-9
+"""Parametric distance (a fraction of the beam, so 6e-9 m at 6 m) within which a beam
+counts as passing through a cell corner (:func:`_cast_beam`); rounding leaves ~1e-14."""
+
+
 @numba.njit(cache=True)
 def _cast_beam(
     cells: NDArray[np.int8],
@@ -67,7 +72,13 @@ def _cast_beam(
     t_entry = 0.0
     for k in range(n_steps + 1):
         if k > 0:
-            if t_max_x < t_max_y:
+            # A beam through a cell corner (t_max_x == t_max_y) enters the y neighbour
+            # first, and so does one that misses the corner by less than _CORNER_TIE: the
+            # virtual robot drives from cell centres along diagonals, so its beams at
+            # multiples of 45 degrees pass exactly through corners, and which side the last
+            # bit of its heading (np.arctan2, whose SIMD code differs between CPUs) or of
+            # cos/sin puts them on must not decide whether a beam is valid (issue 36).
+            if t_max_x < t_max_y - _CORNER_TIE:
                 t_entry = t_max_x
                 ix += step_x
                 t_max_x += t_delta_x
