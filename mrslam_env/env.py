@@ -50,6 +50,11 @@ local_map   Box(0, 1, (2, S, S),   egocentric crop of the robot's own map, centr
                                    ``S = local_map.cells`` (64) of ``cell_size`` (0.1 m)
 ==========  =====================  =======================================================
 
+One robot (``n_robots=1``: single-robot SLAM, no teammates) is supported: its ``peer`` is
+an empty ``(0, 4)`` array and its ``comm`` an empty int8 vector, whose space is
+``Box(0, 1, (0,), int8)`` (Gymnasium's ``MultiBinary`` cannot be empty); the flat
+observation then has no peer or comm entries.
+
 ``EnvConfig(flat_observation=True)`` replaces the ``Dict`` by one float32 vector per robot,
 every entry in [0, 1] or [-1, 1]: scan / max_range, odom (positions /
 ``flat_length_scale``, clipped; heading / pi), peer (detected, range / detect_range,
@@ -90,7 +95,11 @@ from this episode on) and ``{"randomize_starts": True}`` (robot 0 at a random st
 of the scenario's region, random heading; the others automatic). ``EnvConfig`` switches
 ``randomize_starts`` and ``randomize_world`` (a parametric family such as ``"procedural"``:
 a fresh layout every reset) do that for every episode. All draws come from the reset's
-seed: the same seed gives the same episode. Other option keys are ignored.
+seed: the same seed gives the same episode. Any other key raises ``ValueError`` naming it
+and the known ones (``RESET_OPTIONS``), so a misspelling such as ``"randomise_starts"``
+cannot pass unnoticed; only ``"options"`` is accepted and ignored, the probe PettingZoo's
+API tests reset with. The single-robot env passes its options through, with the same
+check.
 
 Infos (per robot)
 -----------------
@@ -163,13 +172,21 @@ from mrslam_env.slam.scan import mask_returns_near, sighted_positions
 from mrslam_env.slam.slam import RobotSlam
 from mrslam_env.wrappers import ObservationFlattener
 
-__all__ = ["MultiRobotSlamEnv", "env", "parallel_env"]
+__all__ = ["RESET_OPTIONS", "MultiRobotSlamEnv", "env", "parallel_env"]
 
 AgentID = str
 ObsDict = dict[str, NDArray[Any]]
 
 PEER_MASK_MARGIN = 0.15
 """Beyond the robot radius (m): covers the peer sensor's noise."""
+
+RESET_OPTIONS = ("scenario", "randomize_starts")
+"""The keys ``reset(options=...)`` takes (module notes, Episodes); others raise."""
+
+PETTINGZOO_PROBE_OPTION = "options"
+"""The one other key accepted, and ignored: PettingZoo's ``api_test`` and
+``parallel_api_test`` reset with ``options={"options": 1}`` to check that ``reset`` takes
+options at all."""
 
 ROBOT_COLOURS = [(31, 119, 180), (214, 39, 40), (44, 160, 44), (148, 103, 189), (255, 127, 14)]
 
@@ -267,7 +284,8 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
                 np.tile([1.0, peer.detect_range, np.pi, np.pi], (others, 1)),
                 dtype=np.float64,
             ),
-            "comm": spaces.MultiBinary(others),
+            # Gymnasium's MultiBinary needs n >= 1: one robot's empty link vector is a Box.
+            "comm": spaces.MultiBinary(others) if others else spaces.Box(0, 1, (0,), np.int8),
         }
         if self.config.slam is not None:
             side = self.config.local_map.cells
@@ -310,7 +328,7 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
             seed = self._initial_seed
         if seed is not None:
             self.np_random, self.np_random_seed = seeding.np_random(seed)
-        options = dict(options or {})  # other keys are ignored, as PettingZoo expects
+        options = checked_options(options)
         if "scenario" in options:
             scenario = options["scenario"]
             if not isinstance(scenario, str | WorldSpec):
@@ -747,6 +765,28 @@ def checked_seed(seed: Any) -> int | None:
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
     return int(seed)
+
+
+def checked_options(options: Any) -> dict[str, Any]:
+    """``reset``'s ``options`` as a dict of the :data:`RESET_OPTIONS` keys.
+
+    Raises
+    ------
+    ValueError
+        For a key that is not one of :data:`RESET_OPTIONS` (a misspelled option would
+        otherwise change nothing, silently), or options that are not a dict.
+    """
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise ValueError(f"reset options must be a dict or None, got {options!r}")
+    unknown = [key for key in options if key not in (*RESET_OPTIONS, PETTINGZOO_PROBE_OPTION)]
+    if unknown:
+        raise ValueError(
+            f"unknown reset option {', '.join(repr(key) for key in unknown)}; "
+            f"the options are {', '.join(repr(key) for key in RESET_OPTIONS)}"
+        )
+    return {key: value for key, value in options.items() if key in RESET_OPTIONS}
 
 
 def observable_cells(grid: GridMap, starts: NDArray[np.float64]) -> NDArray[np.bool_]:

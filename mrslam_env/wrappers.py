@@ -29,7 +29,9 @@ Single robot (:class:`agents.single_robot.SingleRobotEnv`, registered with Gymna
 ``robot_0`` learns, on the flat observation; its teammates run a scripted policy,
 ``"frontier"`` (:class:`agents.explorer.ExplorerPolicy` on its own SLAM map; with onboard
 SLAM off the teammate runs a SLAM of its own on its odometry and scan), ``"wander"``
-(:class:`agents.wander.WanderPolicy`, scan only) or ``"idle"`` (stand still). The
+(:class:`agents.wander.WanderPolicy`, scan only) or ``"idle"`` (stand still). Its
+``reset(options=...)`` passes them to the parallel env, which takes the keys of
+``mrslam_env.env.RESET_OPTIONS`` and refuses any other by name. The
 library never imports :mod:`agents` (docs/design.md §1): the registration names the class
 by a string, which Gymnasium imports when the env is made.
 """
