@@ -4,7 +4,7 @@ Shows ``env.unwrapped.robot_map(agent)`` (the robot's own map, in its start fram
 ``mrslam_env.mapio.save_map`` and how to judge the SLAM pose against the privileged
 ``infos[agent]["true_pose"]`` (evaluation only, never for a policy).
 
-Run: python examples/02_slam_map.py [--steps 400] [--out robot_0.yaml]
+Run: python examples/02_slam_map.py [--steps 400] [--out runs/robot_0.yaml] [--overwrite]
 """
 
 import argparse
@@ -14,12 +14,15 @@ import numpy as np
 from agents.wander import WanderPolicy
 from mrslam_env import parallel_env
 from mrslam_env.geometry import compose
-from mrslam_env.mapio import save_map
+from mrslam_env.mapio import map_yaml_path, save_map
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--steps", type=int, default=400)
-parser.add_argument("--out", default="robot_0.yaml")
+parser.add_argument("--out", type=map_yaml_path, default="runs/robot_0.yaml")
+parser.add_argument("--overwrite", action="store_true", help="replace an existing output")
 args = parser.parse_args()
+if not args.overwrite and (args.out.exists() or args.out.with_suffix(".pgm").exists()):
+    parser.error(f"{args.out} exists; --overwrite replaces it")  # never a silent overwrite
 
 env = parallel_env(scenario="office", seed=0)
 observations, infos = env.reset()

@@ -25,13 +25,13 @@ config = RunConfig(scenario=args.scenario, seed=0, max_steps=args.steps, out=out
 report = run_experiment(config)  # stops at 95 % coverage or after --steps
 
 merge = report["merge"]
-print(f"{report['steps']} steps ({report['sim_time']} s simulated) in {report['wall_time']} s")
+print(f"{report['steps']} steps ({report['sim_time_s']} s simulated) in {report['wall_time_s']} s")
 print(f"team state: {report['team_state']}; coverage {report['coverage']['merged']:.1%}")
 if merge["verified"]:
     print(
-        f"merge verified at step {merge['step_verified']} after testing "
-        f"{merge['hypotheses_tested']} hypotheses: error {merge['translation_error']} m, "
-        f"{merge['rotation_error']}°"
+        f"merge verified at step {merge['step_first_joined']} after testing "
+        f"{merge['hypotheses_tested']} hypotheses: error {merge['worst_translation_error_m']} m, "
+        f"{merge['worst_rotation_error_deg']}°"
     )
 else:
     print("no verified merge (try more --steps)")

@@ -2,13 +2,13 @@
 agents/policy.py), so that the team runs it like the frontier explorer.
 
 The model is the zip that examples/train_sb3_ppo.py saves; its path comes from the
-environment variable ``MRSLAM_SB3_MODEL`` (default ``ppo_mrslam.zip``). The robot's
+environment variable ``MRSLAM_SB3_MODEL`` (default ``runs/ppo_mrslam.zip``). The robot's
 ``Dict`` observation is flattened by :class:`mrslam_env.wrappers.ObservationFlattener`,
 exactly as the env did in training (``EnvConfig(flat_observation=True)``), and the model's
 deterministic action is returned.
 
 Needs the ``rl`` extra: pip install -e '.[rl]'
-Run: MRSLAM_SB3_MODEL=ppo_mrslam.zip mrslam run --policy examples/sb3_policy.py:sb3_policy
+Run: MRSLAM_SB3_MODEL=runs/ppo_mrslam.zip mrslam run --policy examples/sb3_policy.py:sb3_policy
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from mrslam_env.config import EnvConfig
 from mrslam_env.wrappers import ObservationFlattener
 
 MODEL_VARIABLE = "MRSLAM_SB3_MODEL"
-DEFAULT_MODEL = "ppo_mrslam.zip"
+DEFAULT_MODEL = "runs/ppo_mrslam.zip"
 
 
 class SB3Policy:

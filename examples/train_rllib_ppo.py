@@ -7,7 +7,7 @@ shared`` (``RLModule.from_checkpoint`` reads it).
 
 Needs the ``rl`` extra: pip install -e '.[rl]'
 Run: python examples/train_rllib_ppo.py [--steps 20000] [--scenario office] [--seed 0]
-    [--env-runners 0] [--out rllib_mrslam]
+    [--env-runners 0] [--out runs/rllib_mrslam]
 """
 
 import argparse
@@ -29,7 +29,7 @@ parser.add_argument("--episode-steps", type=int, default=500)
 parser.add_argument("--batch", type=int, default=2000, help="env steps per PPO update")
 parser.add_argument("--env-runners", type=int, default=0, help="0: sample in this process")
 parser.add_argument("--seed", type=int, default=0)
-parser.add_argument("--out", default="rllib_mrslam")
+parser.add_argument("--out", default="runs/rllib_mrslam")
 args = parser.parse_args()
 
 

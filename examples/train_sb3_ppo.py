@@ -8,7 +8,7 @@ examples/sb3_policy.py turns it into an exploration policy for ``mrslam run --po
 
 Needs the ``rl`` extra: pip install -e '.[rl]'
 Run: python examples/train_sb3_ppo.py [--steps 50000] [--scenario office] [--seed 0]
-    [--out ppo_mrslam.zip]
+    [--out runs/ppo_mrslam.zip]
 """
 
 import argparse
@@ -25,7 +25,7 @@ parser.add_argument("--steps", type=int, default=50_000, help="robot-steps to tr
 parser.add_argument("--scenario", default="office")  # `mrslam scenarios` lists them
 parser.add_argument("--episode-steps", type=int, default=500)
 parser.add_argument("--seed", type=int, default=0)
-parser.add_argument("--out", default="ppo_mrslam.zip")
+parser.add_argument("--out", default="runs/ppo_mrslam.zip")
 args = parser.parse_args()
 
 set_random_seed(args.seed)  # python, numpy and torch: the network and the action noise

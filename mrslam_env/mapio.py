@@ -45,7 +45,11 @@ Writing produces what ``map_saver`` writes: a PGM ``P5`` with 0 = occupied, 254 
 ``load_map_lattice(save_map(path, grid, yaw=a))`` gives back ``grid`` and ``a``.
 
 Every problem with an input file raises :class:`MapFileError` with a one-line message
-``"<file>: <problem>"``.
+``"<file>: <problem>"``. Input files are checked before their data is read: a YAML or an
+image must be a regular file (after resolving links: not a FIFO, a device or a folder, which
+could block or never end), a YAML at most :data:`MAX_YAML_BYTES`, an image at most
+:data:`MAX_IMAGE_FILE_BYTES` with a header-declared size within :data:`MAX_GRID_CELLS`; and
+an origin must lie where float64 holds a cell (:data:`ORIGIN_PRECISION`).
 """
 
 from __future__ import annotations
@@ -53,6 +57,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import stat
 from pathlib import Path
 from typing import Any
 
@@ -66,7 +71,10 @@ from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap, grid_in_frame
 __all__ = [
     "FREE_PIXEL",
     "MAX_GRID_CELLS",
+    "MAX_IMAGE_FILE_BYTES",
+    "MAX_YAML_BYTES",
     "OCCUPIED_PIXEL",
+    "ORIGIN_PRECISION",
     "UNKNOWN_PIXEL",
     "MapFileError",
     "check_grid_size",
@@ -144,6 +152,72 @@ def check_grid_size(shape: tuple[float, float], what: str) -> None:
         )
 
 
+MAX_YAML_BYTES = 1 << 20
+"""The largest map YAML read, in bytes (1 MiB; a map YAML is a few lines)."""
+
+MAX_IMAGE_FILE_BYTES = 4 * MAX_GRID_CELLS + (1 << 20)
+"""The largest map image file read, in bytes: 4 bytes a pixel (an ascii PGM's ``255 ``, an
+RGBA bitmap) of a :data:`MAX_GRID_CELLS` image, plus 1 MiB of header."""
+
+ORIGIN_PRECISION = 1e-5
+"""An origin is refused where float64 cannot hold a cell: the spacing of float64 numbers at
+the map's farthest corner (``max(|x|, |y|)`` of the origin plus the image's diagonal) must be
+under this fraction of the resolution. At 0.05 m/cell that allows corners up to about
+2e9 m from 0 (an origin of 1e15 m is off by 0.125 m, 2.5 cells); real maps' origins are
+hundreds of metres."""
+
+_PNM_HEADER_BYTES = 1 << 16
+
+_FILE_KINDS = (
+    (stat.S_ISDIR, "a folder"),
+    (stat.S_ISFIFO, "a FIFO"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def _regular_file_problem(path: Path) -> str | None:
+    """Why ``path`` (links resolved) is not a regular file, or None if it is one.
+
+    Raises
+    ------
+    OSError
+        From ``stat`` (e.g. FileNotFoundError).
+    """
+    mode = path.stat().st_mode  # follows links
+    if stat.S_ISREG(mode):
+        return None
+    kind = next((name for test, name in _FILE_KINDS if test(mode)), "not a file")
+    target = f", {path.resolve()}" if path.is_symlink() else ""
+    return f"not a regular file ({kind}{target})"
+
+
+def _read_at_most(path: Path, limit: int, what: str) -> bytes:
+    """The bytes of a regular file of at most ``limit`` bytes (it may not grow past it)."""
+    with path.open("rb") as handle:
+        data = handle.read(limit + 1)
+    if len(data) > limit:
+        raise MapFileError(path, f"{what} grew past the limit of {limit:,} bytes while read")
+    return data
+
+
+def _check_origin_precision(
+    yaml_path: Path, origin: tuple[float, float], resolution: float, shape: tuple[int, int]
+) -> None:
+    """Refuse an origin where float64 cannot hold a cell (:data:`ORIGIN_PRECISION`)."""
+    x0, y0 = origin
+    reach = max(abs(x0), abs(y0)) + math.hypot(*shape) * resolution
+    spacing = math.ulp(reach)
+    if not spacing < ORIGIN_PRECISION * resolution:
+        raise MapFileError(
+            yaml_path,
+            f"origin ({x0:g}, {y0:g}) m is too far from 0: the float64 spacing at the map's "
+            f"farthest corner ({reach:.3g} m) is {spacing:.3g} m, not under {ORIGIN_PRECISION:g} "
+            f"of the resolution ({resolution:g} m); move the origin nearer 0",
+        )
+
+
 def _check_image_size(path: Path, width: int, height: int) -> None:
     try:
         check_grid_size((height, width), f"image of {width} x {height} pixels")
@@ -160,18 +234,17 @@ def map_images(*yaml_paths: PathLike) -> list[Path]:
     return images
 
 
-def _read_pnm_grey(path: Path, data: bytes) -> NDArray[np.uint8]:
-    """Parse a PGM ``P5`` (binary) or ``P2`` (ascii) image into uint8 (height, width).
-
-    Samples are stretched to 0..255 when ``maxval < 255`` (as SDL_image does, so ROS sees
-    the same values); ``maxval > 255`` (16-bit) is rejected.
-    """
-    magic = data[:2]
+def _pnm_header(path: Path, data: bytes, complete: bool = True) -> tuple[int, int, int, int]:
+    """(width, height, maxval, end of the header) of a PGM, its size and maxval checked;
+    ``complete`` False: ``data`` is the file's start only (a token that reaches its end
+    may be cut)."""
     position = 2
     header: list[int] = []
     for name in ("width", "height", "maxval"):
         match = _PNM_TOKEN.match(data, position)
-        if match is None:
+        if match is None or (not complete and match.end() >= len(data)):
+            if not complete:
+                raise MapFileError(path, f"PGM header longer than {len(data):,} bytes")
             raise MapFileError(path, f"corrupt PGM header: missing {name}")
         try:
             header.append(int(match.group(1)))
@@ -188,6 +261,17 @@ def _read_pnm_grey(path: Path, data: bytes) -> NDArray[np.uint8]:
         raise MapFileError(path, f"16-bit images are not supported (PGM maxval {maxval})")
     if maxval <= 0:
         raise MapFileError(path, f"corrupt PGM header: maxval is {maxval}")
+    return width, height, maxval, position
+
+
+def _read_pnm_grey(path: Path, data: bytes) -> NDArray[np.uint8]:
+    """Parse a PGM ``P5`` (binary) or ``P2`` (ascii) image into uint8 (height, width).
+
+    Samples are stretched to 0..255 when ``maxval < 255`` (as SDL_image does, so ROS sees
+    the same values); ``maxval > 255`` (16-bit) is rejected.
+    """
+    magic = data[:2]
+    width, height, maxval, position = _pnm_header(path, data)
     count = width * height
     if magic == b"P5":
         # Exactly one whitespace character separates the header from the raster, and the
@@ -284,20 +368,36 @@ def read_image(path: PathLike) -> NDArray[np.uint8]:
     Raises
     ------
     MapFileError
-        Missing, unreadable, corrupt, empty or 16-bit image.
+        Missing, not a regular file, unreadable, corrupt, empty or 16-bit image, or one
+        over :data:`MAX_IMAGE_FILE_BYTES` or (its header says) :data:`MAX_GRID_CELLS`:
+        checked before the pixels are read.
     """
     path = Path(path)
     try:
-        data = path.read_bytes()
+        problem = _regular_file_problem(path)
+        if problem is not None:
+            raise MapFileError(path, problem)
+        size = path.stat().st_size
+        if size > MAX_IMAGE_FILE_BYTES:
+            raise MapFileError(
+                path,
+                f"image file of {size:,} bytes; the limit is {MAX_IMAGE_FILE_BYTES:,} (4 bytes "
+                f"a pixel of {MAX_GRID_CELLS:,} pixels, plus 1 MiB)",
+            )
+        with path.open("rb") as handle:
+            head = handle.read(_PNM_HEADER_BYTES)
+        if len(head) == 0:
+            raise MapFileError(path, "empty image file (0 bytes)")
+        if not (head[:2] in (b"P5", b"P2") and len(head) > 2 and head[2:3].isspace()):
+            return _read_pillow_grey(path)
+        if len(head) < size:  # the header's size checked before the pixels are read
+            _pnm_header(path, head, complete=False)
+        data = _read_at_most(path, MAX_IMAGE_FILE_BYTES, "image file")
     except FileNotFoundError:
         raise MapFileError(path, "image file not found") from None
     except OSError as error:
         raise MapFileError(path, f"cannot read image file ({error.strerror})") from error
-    if len(data) == 0:
-        raise MapFileError(path, "empty image file (0 bytes)")
-    if data[:2] in (b"P5", b"P2") and len(data) > 2 and data[2:3].isspace():
-        return _read_pnm_grey(path, data)
-    return _read_pillow_grey(path)
+    return _read_pnm_grey(path, data)
 
 
 def grey_to_cells(
@@ -364,7 +464,19 @@ def _number(yaml_path: Path, key: str, value: Any) -> float:
 
 def _read_yaml(yaml_path: Path) -> dict[str, Any]:
     try:
-        text = yaml_path.read_text(encoding="utf-8")
+        if yaml_path.is_dir():
+            raise IsADirectoryError
+        problem = _regular_file_problem(yaml_path)
+        if problem is not None:
+            raise MapFileError(yaml_path, problem)
+        size = yaml_path.stat().st_size
+        if size > MAX_YAML_BYTES:
+            raise MapFileError(
+                yaml_path,
+                f"map YAML of {size:,} bytes; the limit is {MAX_YAML_BYTES:,} (a map YAML is "
+                "a few lines)",
+            )
+        text = _read_at_most(yaml_path, MAX_YAML_BYTES, "map YAML").decode("utf-8")
     except FileNotFoundError:
         raise MapFileError(yaml_path, "map YAML file not found") from None
     except IsADirectoryError:
@@ -475,12 +587,18 @@ def load_map_lattice(path: PathLike) -> tuple[GridMap, float]:
         raise MapFileError(
             yaml_path, f"unsupported mode {mode!r}; expected one of {', '.join(MODES)}"
         )
+    _check_origin_precision(yaml_path, (x0, y0), resolution, (0, 0))
     image_path = Path(image_name)
     if not image_path.is_absolute():
         image_path = yaml_path.parent / image_path
-    if not image_path.is_file():
-        raise MapFileError(yaml_path, f"image file not found: {image_path}")
+    try:
+        problem = _regular_file_problem(image_path)
+    except OSError:
+        raise MapFileError(yaml_path, f"image file not found: {image_path}") from None
+    if problem is not None:
+        raise MapFileError(yaml_path, f"image {image_path} is {problem}")
     grey = read_image(image_path)
+    _check_origin_precision(yaml_path, (x0, y0), resolution, grey.shape)
     cells = grey_to_cells(
         grey,
         negate=negate,

@@ -10,23 +10,36 @@
 ``mrslam bench merge``         map merging: our pipeline against the random walk alone and
                                the ROS map_merge feature baseline, on simulated map pairs
                                (``--set cuts``: on pairs cut from the real map files)
+``mrslam --version``           the installed version
 
 Exit codes: 0 done; 2 bad input (unknown scenario, unreadable map, bad values, an output
 that would overwrite an input), printed as one line ``mrslam: error: ...``; 3 ``mrslam
 merge`` found no confident merge (the transform is null and the reason is printed); 1 an
 unexpected failure (one line; ``--debug`` shows the traceback); 130 / 143 interrupted by
 Ctrl-C / SIGTERM.
+
+Outputs: every command that writes checks its outputs before any work: an output that is
+one of its inputs (a map YAML or its image, also through links) or cannot be written is
+refused, and an existing output is refused unless ``--overwrite`` (``mrslam run`` and
+``bench explore --out`` go to a new or empty folder instead).
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-import sys
-import tempfile
-from collections.abc import Sequence
-from pathlib import Path
-from typing import Any, NoReturn
+from scenarios import interrupts
+
+# First of all: as the console script, a Ctrl-C or SIGTERM is noted from here on, never
+# raised in the middle of an import (see _cmd_run).
+interrupts.install_for_console_script()
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any, NoReturn  # noqa: E402
 
 __all__ = ["main"]
 
@@ -35,6 +48,31 @@ EXIT_BAD_INPUT = 2
 EXIT_NO_MERGE = 3
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report it
 EXIT_TERMINATED = 143  # 128 + SIGTERM
+
+
+def _count(text: str) -> int:
+    """argparse type of a count (steps, repeats, seeds, pairs, jobs): an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {value}")
+    return value
+
+
+MIN_RESOLUTION = 0.001
+MAX_RESOLUTION = 1.0
+"""The range of ``scenarios --export --resolution``, m/cell (real maps: 0.01 to 0.1)."""
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("mrslam")
+    except PackageNotFoundError:  # run from a source tree that is not installed
+        return "unknown (not installed)"
 
 
 def _seed(text: str) -> int:
@@ -60,6 +98,7 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--debug", action="store_true", help="show the traceback of an unexpected failure"
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     commands = parser.add_subparsers(
         dest="command", required=True, metavar="COMMAND", parser_class=_Parser
     )
@@ -120,6 +159,9 @@ def _build_parser() -> argparse.ArgumentParser:
     merge.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
     merge.add_argument("--rrd", type=Path, help="record the merge stages to this .rrd file")
     merge.add_argument("--seed", type=_seed, default=0, help="seed of the randomised stages")
+    merge.add_argument(
+        "--overwrite", action="store_true", help="replace an existing -o map or --rrd file"
+    )
 
     scen = commands.add_parser("scenarios", help="list the worlds, or export one as a ROS map")
     scen.add_argument(
@@ -128,7 +170,13 @@ def _build_parser() -> argparse.ArgumentParser:
         metavar=("NAME", "OUT.yaml"),
         help="write NAME's ground-truth floor plan as a ROS map (PGM + YAML)",
     )
-    scen.add_argument("--resolution", type=float, default=0.05, help="export resolution, m/cell")
+    scen.add_argument(
+        "--resolution",
+        type=float,
+        default=0.05,
+        help=f"export resolution, m/cell, {MIN_RESOLUTION} to {MAX_RESOLUTION} (default 0.05)",
+    )
+    scen.add_argument("--overwrite", action="store_true", help="replace an existing --export map")
     scen.add_argument("--json", action="store_true")
 
     bench = commands.add_parser("bench", help="benchmarks")
@@ -137,8 +185,8 @@ def _build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--scenarios", nargs="*", help="scenario names (default: all hand-made + procedural-0)"
     )
-    sim.add_argument("--steps", type=int, default=1000)
-    sim.add_argument("--repeats", type=int, default=3)
+    sim.add_argument("--steps", type=_count, default=1000)
+    sim.add_argument("--repeats", type=_count, default=3)
     sim.add_argument("--no-irsim", action="store_true", help="skip the IR-SIM comparison")
     sim.add_argument(
         "--rl",
@@ -154,18 +202,18 @@ def _build_parser() -> argparse.ArgumentParser:
         nargs="*",
         help="scenario names (default: the built-in five and the six real buildings)",
     )
-    slam.add_argument("--steps", type=int, default=3000, help="env steps per run (default 3000)")
+    slam.add_argument("--steps", type=_count, default=3000, help="env steps per run (default 3000)")
     slam.add_argument("--seed", type=_seed, default=0)
     slam.add_argument("--json", action="store_true")
     explore = kinds.add_parser(
         "explore",
-        help="time to 90% coverage: the team against independent robots, the oracle "
+        help="time to 90 %% coverage: the team against independent robots, the oracle "
         "(relative pose known) and one robot alone",
     )
     explore.add_argument("--scenarios", nargs="*", help="scenario names (default: built-in five)")
-    explore.add_argument("--seeds", type=int, default=5, help="seeds 0..N-1 (default 5)")
-    explore.add_argument("--max-steps", type=int, default=4000, help="per run (default 4000)")
-    explore.add_argument("--jobs", type=int, default=1, help="runs at a time (default 1)")
+    explore.add_argument("--seeds", type=_count, default=5, help="seeds 0..N-1 (default 5)")
+    explore.add_argument("--max-steps", type=_count, default=4000, help="per run (default 4000)")
+    explore.add_argument("--jobs", type=_count, default=1, help="runs at a time (default 1)")
     explore.add_argument(
         "--modes",
         default="team,independent,oracle,single",
@@ -191,8 +239,10 @@ def _build_parser() -> argparse.ArgumentParser:
         nargs="?",
         const="",
         metavar="ADDRESS",
-        help="run the runs as Ray tasks: alone, on a local Ray instance of --jobs CPUs; with "
-        "an ADDRESS (e.g. auto), on that cluster (pip install 'mrslam[ray]')",
+        help="run the runs as Ray tasks: alone, on a local Ray instance of --jobs CPUs (or on "
+        "the cluster RAY_ADDRESS names); with an ADDRESS (e.g. auto, or the HOST:PORT ray start "
+        "--head prints), on that cluster; the MRSLAM_* variables reach the workers "
+        "(pip install 'mrslam[ray]')",
     )
     explore.add_argument(
         "--out",
@@ -213,15 +263,15 @@ def _build_parser() -> argparse.ArgumentParser:
         "soak", help="one long run with SLAM and the team: steps/s and memory over time"
     )
     soak.add_argument("--scenario", default="office")
-    soak.add_argument("--steps", type=int, default=100_000, help="env steps (default 1e5)")
-    soak.add_argument("--every", type=int, default=10_000, help="steps between rows")
+    soak.add_argument("--steps", type=_count, default=100_000, help="env steps (default 1e5)")
+    soak.add_argument("--every", type=_count, default=10_000, help="steps between rows")
     soak.add_argument("--seed", type=_seed, default=0)
     soak.add_argument("--json", action="store_true")
     merge = kinds.add_parser(
         "merge", help="map merging: success, wrong answers, refusals and time per method"
     )
     merge.add_argument(
-        "--pairs", type=int, default=40, help="pairs of the built-in or custom set (default 40)"
+        "--pairs", type=_count, default=40, help="pairs of the built-in or custom set (default 40)"
     )
     merge.add_argument(
         "--set",
@@ -233,10 +283,10 @@ def _build_parser() -> argparse.ArgumentParser:
         "different-building pairs (--cut-pairs); ignored with --worlds/--maps",
     )
     merge.add_argument(
-        "--real-pairs", type=int, default=24, help="pairs of the real-building set (default 24)"
+        "--real-pairs", type=_count, default=24, help="pairs of the real-building set (default 24)"
     )
     merge.add_argument(
-        "--cut-pairs", type=int, default=24, help="pairs of the cut set (default 24)"
+        "--cut-pairs", type=_count, default=24, help="pairs of the cut set (default 24)"
     )
     merge.add_argument(
         "--worlds",
@@ -273,7 +323,10 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     merge.add_argument("--regenerate", action="store_true", help="rebuild the cached pairs")
     merge.add_argument(
-        "--jobs", type=int, default=1, help="worlds simulated at a time for new pairs (default 1)"
+        "--jobs",
+        type=_count,
+        default=1,
+        help="worlds simulated at a time for new pairs (default 1)",
     )
     merge.add_argument(
         "--ray",
@@ -298,23 +351,18 @@ def _build_parser() -> argparse.ArgumentParser:
         "each, cached with the pairs)",
     )
     merge.add_argument("--out", type=Path, help="per-pair results: .csv, else JSON")
+    merge.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
     merge.add_argument("--json", action="store_true", help="print the summary as JSON")
     return parser
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    import signal
-
-    from scenarios.experiment import RunInterrupted
-
-    def terminated(signum: int, frame: object) -> None:
-        raise RunInterrupted(signum)
-
-    previous = signal.signal(signal.SIGTERM, terminated)  # ends the run as Ctrl-C does
-    try:
+    # SIGINT and SIGTERM only note the signal, from before the heavy imports to the last
+    # line printed; the run looks at the note between its setup phases and its steps
+    # (scenarios/experiment.py, "Interrupted runs"), so no handler ever raises inside a
+    # numba kernel or a callback, and no signal is lost.
+    with interrupts.noting_signals():
         return _run(args)
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -342,28 +390,34 @@ def _run(args: argparse.Namespace) -> int:
     else:
         merge = report["merge"]
         if merge["verified"]:
+            worst = "error" if report["robots"] == 2 else "worst error"
             merged = (
-                f"merge verified at step {merge['step_verified']} "
-                f"({merge['hypotheses_tested']} hypotheses tested), error "
-                f"{merge['translation_error']:.3f} m / {merge['rotation_error']:.2f}°"
+                f"merge verified at step {merge['step_first_joined']} "
+                f"({merge['hypotheses_tested']} hypotheses tested), {worst} "
+                f"{merge['worst_translation_error_m']:.3f} m / "
+                f"{merge['worst_rotation_error_deg']:.2f}°"
             )
         else:
             merged = f"no merge ({merge['hypotheses_tested']} hypotheses tested)"
-        if "joined" in merge:
+        if report["robots"] > 2:
             merged += f"; {merge['joined']} of {report['robots'] - 1} robots joined robot_0's frame"
         coverage = report["coverage"]["merged"]
         print(
-            f"{report['scenario']}: {report['steps']} steps ({report['sim_time']:.0f} s simulated) "
-            f"in {report['wall_time']:.1f} s; {merged}; coverage {coverage:.0%}"
+            f"{report['scenario']}: {report['steps']} steps "
+            f"({report['sim_time_s']:.0f} s simulated) in {report['wall_time_s']:.1f} s; "
+            f"{merged}; coverage {coverage:.0%}"
         )
         print(f"outputs in {report['outputs']['run_dir']}")
-    if not report["complete"]:
+    # A signal noted after report.json was written still ends the command as a signal does.
+    interrupted = report["interrupted"] or interrupts.received()
+    if interrupted is not None:
+        done = "partial outputs" if not report["complete"] else "the run had ended; outputs"
         print(
-            f"mrslam: interrupted by {report['interrupted']} after {report['steps']} steps; "
-            f"partial outputs in {report['outputs']['run_dir']}",
+            f"mrslam: interrupted by {interrupted} after {report['steps']} steps; "
+            f"{done} in {report['outputs']['run_dir']}",
             file=sys.stderr,
         )
-        return EXIT_INTERRUPTED if report["interrupted"] == "SIGINT" else EXIT_TERMINATED
+        return EXIT_INTERRUPTED if interrupted == "SIGINT" else EXIT_TERMINATED
     return 0
 
 
@@ -387,7 +441,7 @@ def _cmd_merge(args: argparse.Namespace) -> int:
         outputs += [output_yaml, output_yaml.with_suffix(".pgm")]
     if args.rrd is not None:
         outputs.append(args.rrd)
-    check_outputs(outputs, inputs)
+    check_outputs(outputs, inputs, overwrite=args.overwrite)
     if len(grids) > 2:
         return _merge_many(args, grids)
     m1, m2 = grids
@@ -404,7 +458,7 @@ def _cmd_merge(args: argparse.Namespace) -> int:
         print(json.dumps(result.as_dict(), indent=2))
     elif result.transform is not None:
         x, y, theta = result.transform
-        print(f"map1_from_map2: x {x:.4f} m, y {y:.4f} m, theta {theta:.5f} rad")
+        print(f"map1_from_map2: x {x:.4f} m, y {y:.4f} m, theta {math.degrees(theta):.3f}°")
         print(result.reason)
         if args.output is not None:
             print(f"merged map written to {args.output}")
@@ -449,7 +503,10 @@ def _merge_many(args: argparse.Namespace, grids: list[Any]) -> int:
                 print(f"{name}: no confident merge with any map")
             else:
                 x, y, theta = transform
-                print(f"{name}: map0_from_map x {x:.4f} m, y {y:.4f} m, theta {theta:.5f} rad")
+                print(
+                    f"{name}: map0_from_map x {x:.4f} m, y {y:.4f} m, "
+                    f"theta {math.degrees(theta):.3f}°"
+                )
         for a, b in result.inconsistent:
             print(f"warning: the merge of {names[a]} and {names[b]} contradicts the others")
         if args.output is not None:
@@ -466,8 +523,11 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
         from scenarios.worlds.real import REAL_BUILDINGS, map_file
 
         name, out = args.export
-        if not args.resolution > 0:
-            raise ValueError(f"--resolution must be > 0, got {args.resolution}")
+        if not MIN_RESOLUTION <= args.resolution <= MAX_RESOLUTION:  # also nan and inf
+            raise ValueError(
+                f"--resolution must lie in [{MIN_RESOLUTION}, {MAX_RESOLUTION}] m/cell, "
+                f"got {args.resolution}"
+            )
         world = build_world(name)
         xmin, ymin, xmax, ymax = world.bounds
         check_grid_size(
@@ -478,7 +538,8 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
         inputs: list[Path] = []
         if name in REAL_BUILDINGS:  # the packaged map it is built from
             inputs = [map_file(name), *map_images(map_file(name))]
-        check_outputs([output_yaml, output_yaml.with_suffix(".pgm")], inputs)
+        outputs = [output_yaml, output_yaml.with_suffix(".pgm")]
+        check_outputs(outputs, inputs, overwrite=args.overwrite)
         path = save_map(output_yaml, ground_truth_map(world, args.resolution, margin=0.5))
         print(f"wrote {path}")
         return 0
@@ -562,8 +623,6 @@ def _cmd_bench_slam(args: argparse.Namespace) -> int:
         warm_up,
     )
 
-    if args.steps < 1:
-        raise ValueError(f"--steps must be >= 1, got {args.steps}")
     warm_up()  # compile/load the numba kernels before anything is timed
     rows = run_slam_benchmark(args.scenarios or DEFAULT_SCENARIOS, args.steps, args.seed)
     print(json.dumps(rows, indent=2) if args.json else format_slam_table(rows))
@@ -572,9 +631,6 @@ def _cmd_bench_slam(args: argparse.Namespace) -> int:
 
 def _cmd_bench_soak(args: argparse.Namespace) -> int:
     from scenarios.bench.soak import format_soak_table, run_soak
-
-    if args.steps < 1 or args.every < 1:
-        raise ValueError("--steps and --every must be >= 1")
 
     def progress(row: dict[str, object]) -> None:
         print(
@@ -592,6 +648,8 @@ def _cmd_bench_explore(args: argparse.Namespace) -> int:
     from scenarios.bench.explore import format_explore_table, summarise_reports
 
     if args.from_dir is not None:
+        if args.out is not None:
+            raise ValueError("--out keeps the reports of a run; --from runs nothing: give one")
         rows, runs = summarise_reports(args.from_dir)
     else:
         rows, runs = _run_bench_explore(args)
@@ -607,12 +665,12 @@ def _run_bench_explore(
 ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     from scenarios.bench.explore import DEFAULT_SCENARIOS, MODES, run_explore_benchmark
 
-    if args.seeds < 1 or args.max_steps < 1 or args.jobs < 1:
-        raise ValueError("--seeds, --max-steps and --jobs must be >= 1")
     modes = [mode.strip() for mode in args.modes.split(",") if mode.strip()]
     unknown = [mode for mode in modes if mode not in MODES]
     if not modes or unknown:
         raise ValueError(f"--modes must name some of {', '.join(MODES)}, got {args.modes!r}")
+    if args.out is not None:
+        check_output_folder(args.out, "--out")
     return run_explore_benchmark(
         args.scenarios or DEFAULT_SCENARIOS,
         range(args.seeds),
@@ -648,20 +706,24 @@ def _cmd_bench_merge(args: argparse.Namespace) -> int:
     from scenarios.bench.merge.run import VARIANTS, run_merge_benchmark
     from scenarios.bench.merge.twins import load_or_compute_world_twins
 
-    if args.jobs < 1:
-        raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
     names = [name.strip() for name in args.methods.split(",") if name.strip()]
     if not names:
         raise ValueError("--methods names no method")
-    counts = (("--pairs", args.pairs), ("--real-pairs", args.real_pairs))
-    for option, count in (*counts, ("--cut-pairs", args.cut_pairs)):
-        if count < 1:
-            raise ValueError(f"{option} must be >= 1, got {count}")
     variants = [v.strip() for v in args.variants.split(",") if v.strip() and v.strip() != "none"]
     for variant in variants:
         if variant not in VARIANTS:
             raise ValueError(f"unknown variant {variant!r}; variants are {', '.join(VARIANTS)}")
     methods, skipped = resolve_methods(names)
+    if args.out is not None:  # the maps read and their images are never written over
+        from contextlib import suppress
+
+        from mrslam_env.mapio import MapFileError, map_images
+
+        inputs = list(args.maps or ())
+        for path in args.maps or ():
+            with suppress(MapFileError):  # reported when the pairs are made, before --out
+                inputs += map_images(path)
+        check_outputs([args.out], inputs, overwrite=args.overwrite)
 
     def progress(message: str) -> None:
         print(message, file=sys.stderr, flush=True)
@@ -800,10 +862,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         "bench": _cmd_bench,
     }
     try:
+        if args.command != "run":  # the other commands stop by KeyboardInterrupt
+            interrupts.restore()
+            interrupts.raise_if_received()
         return handlers[args.command](args)
     except KeyboardInterrupt as stop:
         name = getattr(stop, "signal_name", "SIGINT")
-        print(f"mrslam: interrupted by {name}", file=sys.stderr)
+        before = args.command == "run" and isinstance(stop, interrupts.RunInterrupted)
+        detail = " before the run folder was made; nothing written" if before else ""
+        print(f"mrslam: interrupted by {name}{detail}", file=sys.stderr)
         return EXIT_INTERRUPTED if name == "SIGINT" else EXIT_TERMINATED
     except (ValueError, OSError, MemoryError) as error:
         if args.debug:
@@ -826,10 +893,12 @@ def _one_line(error: BaseException) -> str:
     return text.splitlines()[0] if text else type(error).__name__
 
 
-def check_outputs(outputs: Sequence[Path], inputs: Sequence[Path]) -> None:
+def check_outputs(
+    outputs: Sequence[Path], inputs: Sequence[Path], *, overwrite: bool = False
+) -> None:
     """Refuse, before any work, output files that would overwrite an input or cannot be
     written: the same file as an input (also through links), an existing folder, a missing
-    or read-only folder.
+    or read-only folder; and an existing file unless ``overwrite`` (``--overwrite``).
 
     Raises
     ------
@@ -847,6 +916,8 @@ def check_outputs(outputs: Sequence[Path], inputs: Sequence[Path]) -> None:
         seen.add(output.resolve())
         if output.is_dir():
             raise ValueError(f"output {output} is a folder; name a file")
+        if output.exists() and not overwrite:
+            raise ValueError(f"output {output} exists; --overwrite replaces it")
         if not output.parent.is_dir():
             raise ValueError(f"output folder {output.parent} does not exist")
         try:  # the only sure test of "can be written here" is writing
@@ -854,6 +925,35 @@ def check_outputs(outputs: Sequence[Path], inputs: Sequence[Path]) -> None:
                 pass
         except OSError as error:
             raise ValueError(f"cannot write in {output.parent} ({error.strerror})") from None
+
+
+def check_output_folder(folder: Path, option: str) -> None:
+    """Refuse, before any work, an output folder that is not new or empty or that cannot be
+    created or written (``option`` names it in the message).
+
+    Raises
+    ------
+    ValueError
+        Naming the folder and the problem.
+    """
+    folder = Path(folder)
+    if folder.exists():
+        if not folder.is_dir():
+            raise ValueError(f"{option} {folder}: exists and is not a folder")
+        if any(folder.iterdir()):
+            raise ValueError(f"{option} {folder}: already exists and is not an empty folder")
+        where = folder
+    else:
+        where = folder.parent
+        while not where.exists() and where != where.parent:
+            where = where.parent
+        if not where.is_dir():
+            raise ValueError(f"{option} {folder}: cannot be created, {where} is not a folder")
+    try:  # the only sure test of "can be written here" is writing
+        with tempfile.TemporaryFile(dir=where):
+            pass
+    except OSError as error:
+        raise ValueError(f"{option} {folder}: cannot write in {where} ({error.strerror})") from None
 
 
 if __name__ == "__main__":

@@ -18,26 +18,57 @@ and ``robot_1.yaml``/``.pgm`` (each robot's map in its own frame), ``merged.yaml
 preliminary estimate, merge after refinement). Every file is written under a temporary
 name and renamed into place.
 
-**The run folder.** A run never mixes its outputs with another's: when ``<out>/<name>``
-exists and is not empty, the run goes to the first free ``<name>-2``, ``<name>-3``, …;
-with ``overwrite=True`` (``--overwrite``) it reuses ``<name>`` after deleting the
-outputs of the earlier run there (the files named above; nothing else is touched).
+**The run folder.** A run never mixes its outputs with another's, nor writes into a folder
+another run holds. It *claims* its folder by creating it (``mkdir``, which only one of
+several runs started together can do): ``<out>/<name>`` when no such folder exists, else
+the first ``<name>-2``, ``<name>-3``, … it can create; an existing folder, even an empty
+one, is never claimed. With ``overwrite=True`` (``--overwrite``) the run reuses an existing
+``<out>/<name>`` instead, after deleting the outputs of the earlier run there (the files
+named above and temporaries a crashed run left; nothing else is touched). Either way the
+run holds its folder with a marker file, ``.mrslam-run``, created with ``O_EXCL`` and
+removed when the run ends: ``--overwrite`` refuses a folder whose marker exists (a run is
+writing there; after a run killed with SIGKILL, delete the marker by hand). Before
+``--overwrite`` deletes anything, every input file (``--map``'s YAML and its image,
+resolved through links) is checked; one inside the run folder is refused. Temporary names
+are unique per process (``.recording.<pid>.part.rrd``; the other outputs through
+:func:`mrslam_env.atomic.atomic_path`).
 
-**Interrupted runs.** Ctrl-C (SIGINT, and SIGTERM where the CLI turns it into
-:class:`RunInterrupted`) stops the stepping loop; the outputs of the steps done are still
-written, with ``"complete": false`` and ``"interrupted": "SIGINT"`` in ``report.json``,
-and the recording is closed so that it verifies.
+**Interrupted runs.** SIGINT (Ctrl-C) and SIGTERM only note the signal
+(:mod:`scenarios.interrupts`); the run looks at the note between setup phases and between
+steps, never inside one. A signal before the run folder is claimed (while the world, the
+env and its kernels load) ends the run with nothing written (:class:`RunInterrupted`); once
+the folder exists, the run stops stepping and writes the outputs of the steps done, with
+``"complete": false`` and ``"interrupted": "SIGINT"`` (or ``"SIGTERM"``) in
+``report.json``, and the recording closed so that it verifies. A signal while the outputs
+are written lets them finish and marks the report the same way: every run folder gets a
+``report.json``, and no signal is lost.
+
+**Too large a world** is refused before anything is allocated
+(:func:`mrslam_env.sim.mapworld.check_world_extent`: the world's extent at the SLAM
+resolution, at most 25 M cells).
+
+**The report** (``report.json``). Quantities carry their unit in the key: ``sim_time_s``,
+``wall_time_s``, ``t90_s``, ``ate_m``, ``translation_error_m``, ``rotation_error_deg``
+(angles in degrees); counts of steps are named ``steps`` or ``step_*``; coverage and map
+agreement are fractions. A transform is ``{x, y, theta}`` (m, m, rad: the format of
+``mrslam merge --json``), ``map0_from_map<k>``. ``merge.robots`` has one entry per robot
+but robot 0: ``joined`` (a verified merge brought it into robot 0's frame),
+``step_joined``, ``transform`` (refined), ``verified_transform`` (as verified, before
+refinement), ``true_transform``, ``translation_error_m``, ``rotation_error_deg``. The top
+of ``merge`` summarises them: ``verified`` (some robot joined), ``joined``,
+``all_joined``, ``step_first_joined``, ``step_all_joined``, ``worst_translation_error_m``,
+``worst_rotation_error_deg``, and the team's counts (hypotheses tested, rendezvous, …).
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import re
-import signal
-import threading
+import socket
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -60,15 +91,25 @@ from mrslam_env.evaluation import (
 )
 from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import GridMap
-from mrslam_env.mapio import load_map, save_map
+from mrslam_env.mapio import load_map, map_images, save_map
 from mrslam_env.merge.fuse import fuse_all
 from mrslam_env.recording import Recorder
 from mrslam_env.registry import build_world
-from mrslam_env.sim.mapworld import world_from_map
+from mrslam_env.sim.mapworld import check_world_extent, world_from_map
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
 from scenarios.figure import summary_figure
+from scenarios.interrupts import RunInterrupted, noting_signals, raise_if_received, received
 
-__all__ = ["RunConfig", "RunInterrupted", "prepare_run_dir", "resolve_world", "run_experiment"]
+__all__ = [
+    "RunConfig",
+    "RunInterrupted",
+    "check_inputs_outside",
+    "partial_recording",
+    "prepare_run_dir",
+    "release_run_dir",
+    "resolve_world",
+    "run_experiment",
+]
 
 OUTPUT_FILES = (
     "recording.rrd",
@@ -79,43 +120,107 @@ OUTPUT_FILES = (
 )
 """A run's outputs besides the robots' maps (``robot_<i>.yaml`` / ``.pgm``)."""
 ROBOT_MAP = re.compile(r"robot_\d+\.(yaml|pgm)")
-PARTIAL_RECORDING = ".recording.part.rrd"
-"""The recording while it is written; renamed to ``recording.rrd`` when closed."""
+RUN_MARKER = ".mrslam-run"
+"""Created with ``O_EXCL`` in the run folder by the run that holds it; removed at its end."""
+LEFTOVERS = re.compile(
+    r"\.(recording|report|figure|merged|robot_\d+)\..*part\.(rrd|json|png|yaml|pgm)"
+)
+"""Temporary files a crashed run may have left (deleted by ``--overwrite``)."""
 
 
-class RunInterrupted(KeyboardInterrupt):
-    """A run stopped by a signal: ``signal_name`` is e.g. ``"SIGTERM"``."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signal.Signals(signum).name)
-        self.signal_name = signal.Signals(signum).name
+def partial_recording(run_dir: Path) -> Path:
+    """The recording while this process writes it; renamed to ``recording.rrd`` when
+    closed. Named for the process, so that no two runs ever share one."""
+    return Path(run_dir) / f".recording.{os.getpid()}.part.rrd"
 
 
-def prepare_run_dir(out: Path, name: str, *, overwrite: bool = False) -> Path:
-    """The folder a run writes to (the module docstring's run-folder convention).
+def input_files(map_path: Path | None) -> list[Path]:
+    """The files a run reads: ``--map``'s YAML and the image it names (none for a scenario)."""
+    if map_path is None:
+        return []
+    return [Path(map_path), *map_images(map_path)]
 
-    ``<out>/<name>`` when it is new or empty; with ``overwrite``, the same folder with an
-    earlier run's outputs deleted; otherwise the first free ``<name>-2``, ``<name>-3``, ….
+
+def check_inputs_outside(folder: Path, inputs: Sequence[Path]) -> None:
+    """Refuse (``ValueError``, one line) when an input file, resolved through links, lies
+    in ``folder``: ``--overwrite`` would delete it or write beside it."""
+    inside = Path(folder).resolve()
+    for path in inputs:
+        resolved = Path(path).resolve()
+        if inside in resolved.parents:
+            link = "" if resolved == Path(path).absolute() else f" (through a link, {resolved})"
+            raise ValueError(
+                f"--overwrite would delete the input map file {path}: it is in the run folder "
+                f"{folder}{link}; copy it elsewhere or choose another --name"
+            )
+
+
+def _hold(folder: Path) -> None:
+    """Create the run marker in ``folder`` (``O_EXCL``); ``ValueError`` when another run
+    holds the folder."""
+    marker = folder / RUN_MARKER
+    try:
+        descriptor = os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+    except FileExistsError:
+        try:
+            holder = marker.read_text(encoding="utf-8").strip() or "unknown"
+        except OSError:
+            holder = "unknown"
+        raise ValueError(
+            f"run folder {folder} is held by another run ({holder}); if no run is using it, "
+            f"delete {marker}"
+        ) from None
+    with os.fdopen(descriptor, "w", encoding="utf-8") as file:
+        file.write(f"pid {os.getpid()} on {socket.gethostname()}\n")
+
+
+def release_run_dir(run_dir: Path) -> None:
+    """Let go of a folder :func:`prepare_run_dir` claimed (remove its marker)."""
+    (Path(run_dir) / RUN_MARKER).unlink(missing_ok=True)
+
+
+def prepare_run_dir(
+    out: Path, name: str, *, overwrite: bool = False, inputs: Sequence[Path] = ()
+) -> Path:
+    """Claim the folder a run writes to (the module docstring's run-folder rule) and hold
+    it; the caller releases it with :func:`release_run_dir` when the run ends.
+
+    A new ``<out>/<name>``, else the first ``<name>-2``, ``<name>-3``, … that this call
+    creates; with ``overwrite``, an existing ``<out>/<name>`` held by no other run, with
+    the earlier run's outputs deleted, after checking that none of ``inputs`` lies in it.
+
+    Raises
+    ------
+    ValueError
+        ``<out>/<name>`` is a file; with ``overwrite``: an input lies in the folder, or
+        another run holds it.
     """
-    folder = Path(out) / name
+    out = Path(out)
+    folder = out / name
     if folder.exists() and not folder.is_dir():
         raise ValueError(f"run folder {folder} exists and is a file")
-    if folder.is_dir() and any(folder.iterdir()):
-        if overwrite:
-            robot_maps = [p.name for p in folder.iterdir() if ROBOT_MAP.fullmatch(p.name)]
-            for old in [*OUTPUT_FILES, PARTIAL_RECORDING, *robot_maps]:
-                (folder / old).unlink(missing_ok=True)
-        else:
-            index = 2
-            while True:  # mkdir claims the folder: two runs started together never share one
-                folder = Path(out) / f"{name}-{index}"
-                try:
-                    folder.mkdir(parents=True)
-                    return folder
-                except FileExistsError:
-                    index += 1
-    folder.mkdir(parents=True, exist_ok=True)
-    return folder
+    if overwrite and folder.is_dir():
+        check_inputs_outside(folder, inputs)
+        _hold(folder)
+        for old in folder.iterdir():
+            earlier = old.name in OUTPUT_FILES or ROBOT_MAP.fullmatch(old.name)
+            if earlier or LEFTOVERS.fullmatch(old.name):
+                old.unlink(missing_ok=True)
+        return folder
+    out.mkdir(parents=True, exist_ok=True)
+    index = 1
+    while True:
+        candidate = folder if index == 1 else out / f"{name}-{index}"
+        index += 1
+        try:
+            candidate.mkdir()  # atomic: of runs started together, one creates it
+        except FileExistsError:
+            continue
+        try:
+            _hold(candidate)
+        except ValueError:  # an --overwrite run took it between the two calls
+            continue
+        return candidate
 
 
 FloatArray = NDArray[np.float64]
@@ -269,43 +374,52 @@ def _pose_dict(pose: FloatArray) -> dict[str, float]:
     }
 
 
-@contextmanager
-def _signals_deferred() -> Iterator[None]:
-    """SIGINT and SIGTERM ignored inside the block (main thread only): a second Ctrl-C, or
-    a scheduler's SIGTERM, while a run writes its outputs cannot leave them half written.
-    Elsewhere (a worker thread) the block runs as it is."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
-    for s in previous:
-        signal.signal(s, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+def _grid_resolution(env_config: EnvConfig) -> float:
+    """The finest grid a run makes of its world: the SLAM's cells, and the ground truth's
+    0.05 m (the recording, the figure and the coverage reach)."""
+    slam = env_config.slam
+    return min(0.05, slam.grid.resolution) if slam is not None else 0.05
 
 
 def run_experiment(config: RunConfig) -> dict[str, Any]:
-    """Run one experiment, write its outputs, return the report (also ``report.json``)."""
+    """Run one experiment, write its outputs, return the report (also ``report.json``).
+
+    SIGINT and SIGTERM are noted, not raised, while it runs (main thread only; the module
+    docstring's interrupted runs). Called from Python without the CLI, a signal noted is
+    sent again once the run has written its outputs and the caller's handlers are back
+    (Ctrl-C then raises ``KeyboardInterrupt`` in the caller, after the run).
+
+    Raises
+    ------
+    RunInterrupted
+        A signal came before the run folder was claimed (nothing was written).
+    ValueError
+        Bad input: an unknown scenario, an unreadable map, too large a world, an input
+        ``--overwrite`` would delete, a folder another run holds.
+    """
+    with noting_signals(redeliver=True):
+        return _run_experiment(config)
+
+
+def _run_experiment(config: RunConfig) -> dict[str, Any]:
     world = resolve_world(config.scenario, config.map_path, config.seed)
     name = config.name or f"{world.name.replace(':', '_')}-seed{config.seed}"
-    if config.overwrite and config.map_path is not None:
-        folder = (Path(config.out) / name).resolve()
-        if Path(config.map_path).resolve().parent == folder:
-            raise ValueError(
-                f"--overwrite would delete the input map {config.map_path} (it is in the run "
-                f"folder {Path(config.out) / name}); copy it elsewhere or choose another --name"
-            )
+    inputs = input_files(config.map_path)
+    if config.overwrite:  # bad input is refused before any work
+        check_inputs_outside(Path(config.out) / name, inputs)
     comm = CommConfig() if config.comm else CommConfig(comm_range=1e-9)
     env_config = EnvConfig(max_cycles=config.max_steps, comm=comm)
+    check_world_extent(world.bounds, _grid_resolution(env_config))
     check_policy(config.policy, env_config)
-    run_dir = prepare_run_dir(Path(config.out), name, overwrite=config.overwrite)
+    # Setup, phase by phase; a signal noted in one ends the run before the next, with no
+    # folder claimed (the kernels load here: a signal waits for the kernel to return).
+    raise_if_received()
     env = MultiRobotSlamEnv(
         scenario=world, n_robots=config.robots, seed=config.seed, config=env_config
     )
+    raise_if_received()
     observations, infos = env.reset()
+    raise_if_received()
     agents = list(env.possible_agents)
     team = build_team(config, env.config)
     maps = MapCache(env)
@@ -313,26 +427,18 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
     world_from_maps = [env.simulator.starts[i].copy() for i in range(len(agents))]
     # The true map0_from_map_i: what the team's transforms are judged against.
     true_transforms = [compose(inverse(world_from_maps[0]), w) for w in world_from_maps]
-    true_transform = true_transforms[1]
     evaluator = CoverageEvaluator(world, env.simulator.starts, radius=env.config.robot.radius)
     if config.oracle:
         team.start_coordinated(np.array(true_transforms[1:]), maps)
     # The robots whose maps count towards coverage (single: robot 0 alone).
     counted = [0] if config.single else list(range(len(agents)))
     idle = np.zeros(2, dtype=np.float32)
-    recording_part = run_dir / PARTIAL_RECORDING
-    recorder = (
-        Recorder(recording_part, n_robots=len(agents), map_every=config.map_every)
-        if config.record
-        else None
-    )
+    raise_if_received()
+    # From here on the run holds its folder, and the folder always gets a report.
+    run_dir = prepare_run_dir(Path(config.out), name, overwrite=config.overwrite, inputs=inputs)
+    recording_part = partial_recording(run_dir)
+    recorder: Recorder | None = None
     try:
-        if recorder is not None:
-            recorder.log_ground_truth(world, ground_truth_map(world, 0.05))
-            recorder.log_event(
-                f"run {name}: world {world.name}, {len(agents)} robots, seed {config.seed}"
-            )
-            recorder.log_text("team/state", str(team.state))
         # Each robot's SLAM poses (map frame) and true poses (world), every step, for its ATE.
         slam_poses: list[list[FloatArray]] = [[observations[a]["pose"]] for a in agents]
         true_poses: list[list[FloatArray]] = [[infos[a]["true_pose"]] for a in agents]
@@ -358,8 +464,17 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
         interrupted: str | None = None
         started = time.perf_counter()
         try:
+            if config.record:
+                recorder = Recorder(
+                    recording_part, n_robots=len(agents), map_every=config.map_every
+                )
+                recorder.log_ground_truth(world, ground_truth_map(world, 0.05))
+                recorder.log_event(
+                    f"run {name}: world {world.name}, {len(agents)} robots, seed {config.seed}"
+                )
+                recorder.log_text("team/state", str(team.state))
             with _progress(config.max_steps, config.progress) as bar:
-                while env.agents:
+                while env.agents and received() is None:
                     if config.single:
                         actions = [team.act_alone(0, observations[agents[0]], maps(0))]
                         actions += [idle] * (len(agents) - 1)
@@ -432,151 +547,147 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
                             waited = steps - max(last_pending, coverage_step)
                             if not keep_on or all_joined or waited >= config.until_merged_idle:
                                 break
-        except KeyboardInterrupt as stop:  # Ctrl-C or a signal: keep what was done
+        except KeyboardInterrupt as stop:  # raised by code (e.g. a caller's own handler)
             interrupted = getattr(stop, "signal_name", "SIGINT")
-        with _signals_deferred():  # the outputs of the steps done are written whole
-            wall_time = time.perf_counter() - started
+        # The outputs of the steps done are written whole: a signal from here on is noted
+        # and marks the report (checked last, just before report.json is written).
+        interrupted = interrupted or received()
+        wall_time = time.perf_counter() - started
 
-            own_maps = [maps(i) for i in range(len(agents))]
-            for agent, grid in zip(agents, own_maps, strict=True):
-                save_map(run_dir / f"{agent}.yaml", grid)
-            outputs: dict[str, Any] = {
-                "run_dir": str(run_dir),
-                "maps": {agent: str(run_dir / f"{agent}.yaml") for agent in agents},
-            }
-            truth = ground_truth_map(world, own_maps[0].resolution)
-            merged = preliminary = None
-            # The robots in robot 0's frame (a verified transform reaches them), with
-            # their transforms as refined and as verified.
-            joined = [k for k in range(1, len(agents)) if team.roots[k] == 0]
-            merge_report: dict[str, Any] = {
-                "verified": bool(joined),
-                "transform": None,
-                "true_transform": _pose_dict(true_transform),
-                "translation_error": None,
-                "rotation_error": None,
-                "hypotheses_tested": team.hypotheses_tested,
-                "step_verified": team.step_verified,
-                "seeking_steps": sum(team.seeking_steps),
-                "sighting_hypotheses": team.sighting_hypotheses,
-                "first_hypothesis_step": team.first_hypothesis_step,
-                "first_rendezvous_step": team.first_rendezvous_step,
-                "rendezvous_steps": team.rendezvous_steps,
-                "radio_rejections": team.radio_rejections,
-            }
-            if len(agents) > 2:
-                merge_report["joined"] = len(joined)
-                merge_report["robots"] = {
-                    agents[k]: _robot_merge(team, k, true_transforms[k])
-                    for k in range(1, len(agents))
-                }
-            if joined:
-                merged = _fuse_all(own_maps, {k: team.frames[k] for k in joined})
-                verified_transforms = {k: team.verified[k] for k in joined}
-                preliminary = _fuse_all(own_maps, verified_transforms)
-                errors = [
-                    relative_transform_error(team.frames[k], true_transforms[k]) for k in joined
-                ]
-                translation_error = max(t for t, _ in errors)
-                rotation_error = max(r for _, r in errors)
-                merge_report.update(
-                    translation_error=round(translation_error, 4),
-                    rotation_error=round(math.degrees(rotation_error), 4),
+        own_maps = [maps(i) for i in range(len(agents))]
+        for agent, grid in zip(agents, own_maps, strict=True):
+            save_map(run_dir / f"{agent}.yaml", grid)
+        outputs: dict[str, Any] = {
+            "run_dir": str(run_dir),
+            "maps": {agent: str(run_dir / f"{agent}.yaml") for agent in agents},
+        }
+        truth = ground_truth_map(world, own_maps[0].resolution)
+        merged = preliminary = None
+        # The robots in robot 0's frame (a verified transform reaches them), with their
+        # transforms as refined and as verified.
+        joined = [k for k in range(1, len(agents)) if team.roots[k] == 0]
+        robots = {
+            agents[k]: _robot_merge(team, k, true_transforms[k]) for k in range(1, len(agents))
+        }
+        entries = [robots[agents[k]] for k in joined]
+        steps_joined = [entry["step_joined"] for entry in entries]
+        merge_report: dict[str, Any] = {
+            "verified": bool(joined),
+            "joined": len(joined),
+            "all_joined": len(joined) == len(agents) - 1,
+            "step_first_joined": min(steps_joined, default=None),
+            "step_all_joined": max(steps_joined) if len(joined) == len(agents) - 1 else None,
+            "worst_translation_error_m": max(
+                (entry["translation_error_m"] for entry in entries), default=None
+            ),
+            "worst_rotation_error_deg": max(
+                (entry["rotation_error_deg"] for entry in entries), default=None
+            ),
+            "hypotheses_tested": team.hypotheses_tested,
+            "seeking_steps": sum(team.seeking_steps),
+            "sighting_hypotheses": team.sighting_hypotheses,
+            "first_hypothesis_step": team.first_hypothesis_step,
+            "first_rendezvous_step": team.first_rendezvous_step,
+            "rendezvous_steps": team.rendezvous_steps,
+            "radio_rejections": team.radio_rejections,
+            "robots": robots,
+        }
+        if joined:
+            merged = _fuse_all(own_maps, {k: team.frames[k] for k in joined})
+            preliminary = _fuse_all(own_maps, {k: team.verified[k] for k in joined})
+            save_map(run_dir / "merged.yaml", merged)
+            outputs["merged_map"] = str(run_dir / "merged.yaml")
+        apart = [i for i in counted if i != 0 and i not in joined]
+        coverage = {
+            "merged": round(
+                evaluator.coverage(
+                    [merged, *(own_maps[i] for i in apart)],
+                    [world_from_maps[0], *(world_from_maps[i] for i in apart)],
                 )
-                if team.transform is not None:
-                    assert team.preliminary_transform is not None
-                    merge_report.update(
-                        transform=_pose_dict(team.transform),
-                        preliminary_transform=_pose_dict(team.preliminary_transform),
-                    )
-                save_map(run_dir / "merged.yaml", merged)
-                outputs["merged_map"] = str(run_dir / "merged.yaml")
-            apart = [i for i in counted if i != 0 and i not in joined]
-            coverage = {
-                "merged": round(
-                    evaluator.coverage(
-                        [merged, *(own_maps[i] for i in apart)],
-                        [world_from_maps[0], *(world_from_maps[i] for i in apart)],
-                    )
-                    if merged is not None
-                    else evaluator.coverage(
-                        [own_maps[i] for i in counted], [world_from_maps[i] for i in counted]
-                    ),
-                    4,
+                if merged is not None
+                else evaluator.coverage(
+                    [own_maps[i] for i in counted], [world_from_maps[i] for i in counted]
                 ),
-                **{
-                    agent: round(evaluator.coverage([own_maps[i]], [world_from_maps[i]]), 4)
-                    for i, agent in enumerate(agents)
-                },
-            }
-            if config.figure:
-                with atomic_path(run_dir / "figure.png") as figure:
-                    summary_figure(
-                        figure,
-                        truth,
-                        own_maps[0],
-                        own_maps[1],
-                        preliminary,
-                        merged,
-                        more_maps=own_maps[2:],
-                    )
-                outputs["figure"] = str(run_dir / "figure.png")
-            report: dict[str, Any] = {
-                "complete": interrupted is None,
-                "interrupted": interrupted,
-                "scenario": world.name,
-                "seed": config.seed,
-                "steps": steps,
-                "sim_time": round(steps * env_config.dt, 6),
-                "wall_time": round(wall_time, 3),
-                "interaction": config.interaction,
-                "comm": config.comm,
-                "oracle": config.oracle,
-                "single": config.single,
-                "robots": len(agents),
-                "policy": policy_label(config.policy),
-                "policy_spec": config.policy,
-                "merge": merge_report,
-                "coverage": coverage,
-                "t90": None if t90 is None else round(t90, 3),
-                "until_merged": keep_on,
-                "coverage_step": coverage_step,
-                "steps_after_coverage": 0 if coverage_step is None else steps - coverage_step,
-                "coverage_curve": [[s, round(c, 4)] for s, c in coverage_curve],
-                "slam": {
-                    agent: {
-                        "ate": round(ate(i), 4),
-                        "map_agreement": round(
-                            map_agreement(own_maps[i], world_from_maps[i], truth), 4
-                        ),
-                    }
-                    for i, agent in enumerate(agents)
-                },
-                "merged_map_accuracy": None
-                if merged is None
-                else round(map_agreement(merged, world_from_maps[0], truth), 4),
-                "collision_steps": {agent: int(collisions[agent]) for agent in agents},
-                "team_state": str(team.state),
-                "decisions": events,
-                "outputs": outputs,
-            }
-            if recorder is not None:
-                if merged is not None:
-                    recorder.log_grid("team/merged_map", merged)
-                ending = "finished" if interrupted is None else f"interrupted ({interrupted})"
-                recorder.log_event(
-                    f"run {ending} after {steps} steps, coverage {coverage['merged']:.1%}"
+                4,
+            ),
+            **{
+                agent: round(evaluator.coverage([own_maps[i]], [world_from_maps[i]]), 4)
+                for i, agent in enumerate(agents)
+            },
+        }
+        if config.figure:
+            with atomic_path(run_dir / "figure.png") as figure:
+                summary_figure(
+                    figure,
+                    truth,
+                    own_maps[0],
+                    own_maps[1],
+                    preliminary,
+                    merged,
+                    more_maps=own_maps[2:],
                 )
-                recorder.close()
-                recording_part.replace(run_dir / "recording.rrd")
-                outputs["recording"] = str(run_dir / "recording.rrd")
-            write_text_atomic(run_dir / "report.json", json.dumps(report, indent=2) + "\n")
+            outputs["figure"] = str(run_dir / "figure.png")
+        report: dict[str, Any] = {
+            "complete": True,
+            "interrupted": None,
+            "scenario": world.name,
+            "seed": config.seed,
+            "steps": steps,
+            "sim_time_s": round(steps * env_config.dt, 6),
+            "wall_time_s": round(wall_time, 3),
+            "interaction": config.interaction,
+            "comm": config.comm,
+            "oracle": config.oracle,
+            "single": config.single,
+            "robots": len(agents),
+            "policy": policy_label(config.policy),
+            "policy_spec": config.policy,
+            "merge": merge_report,
+            "coverage": coverage,
+            "t90_s": None if t90 is None else round(t90, 3),
+            "until_merged": keep_on,
+            "coverage_step": coverage_step,
+            "steps_after_coverage": 0 if coverage_step is None else steps - coverage_step,
+            "coverage_curve": [[s, round(c, 4)] for s, c in coverage_curve],
+            "slam": {
+                agent: {
+                    "ate_m": round(ate(i), 4),
+                    "map_agreement": round(
+                        map_agreement(own_maps[i], world_from_maps[i], truth), 4
+                    ),
+                }
+                for i, agent in enumerate(agents)
+            },
+            "merged_map_accuracy": None
+            if merged is None
+            else round(map_agreement(merged, world_from_maps[0], truth), 4),
+            "collision_steps": {agent: int(collisions[agent]) for agent in agents},
+            "team_state": str(team.state),
+            "decisions": events,
+            "outputs": outputs,
+        }
+        if recorder is not None:
+            if merged is not None:
+                recorder.log_grid("team/merged_map", merged)
+            interrupted = interrupted or received()
+            ending = "finished" if interrupted is None else f"interrupted ({interrupted})"
+            recorder.log_event(
+                f"run {ending} after {steps} steps, coverage {coverage['merged']:.1%}"
+            )
+            recorder.close()
+            recording_part.replace(run_dir / "recording.rrd")
+            outputs["recording"] = str(run_dir / "recording.rrd")
+        interrupted = interrupted or received()
+        report.update(complete=interrupted is None, interrupted=interrupted)
+        write_text_atomic(run_dir / "report.json", json.dumps(report, indent=2) + "\n")
         return report
     except BaseException:  # a crash: close the recording, leave no partial file
         if recorder is not None:
             recorder.close()
             recording_part.unlink(missing_ok=True)
         raise
+    finally:
+        release_run_dir(run_dir)
 
 
 @dataclass(slots=True)
@@ -689,20 +800,23 @@ def _fuse_all(own_maps: list[GridMap], transforms: dict[int, FloatArray | None])
 
 
 def _robot_merge(team: TeamCoordinator, robot: int, truth: FloatArray) -> dict[str, Any]:
-    """One robot's entry in the report's ``merge.robots`` (teams of more than two)."""
+    """One robot's entry in the report's ``merge.robots``: its own transforms (refined and
+    as verified), its truth, its errors and the step it joined robot 0's frame."""
     transform = team.common_transform(robot)
+    verified = team.verified[robot] if transform is not None else None
     entry: dict[str, Any] = {
         "joined": transform is not None,
-        "step_joined": team.step_joined[robot],
+        "step_joined": None if transform is None else team.step_joined[robot],
         "transform": None if transform is None else _pose_dict(transform),
+        "verified_transform": None if verified is None else _pose_dict(verified),
         "true_transform": _pose_dict(truth),
-        "translation_error": None,
-        "rotation_error": None,
+        "translation_error_m": None,
+        "rotation_error_deg": None,
     }
     if transform is not None:
         translation_error, rotation_error = relative_transform_error(transform, truth)
         entry.update(
-            translation_error=round(translation_error, 4),
-            rotation_error=round(math.degrees(rotation_error), 4),
+            translation_error_m=round(translation_error, 4),
+            rotation_error_deg=round(math.degrees(rotation_error), 4),
         )
     return entry

@@ -56,12 +56,12 @@ def test_the_oracle_coordinates_from_step_0_with_the_true_transform(
     (team,) = teams
     assert states and all(s is TeamState.COORDINATED_EXPLORATION for s in states)
     assert team.step_verified == 0 and team.hypotheses_tested == 0
-    true = report["merge"]["true_transform"]
+    true = report["merge"]["robots"]["robot_1"]["true_transform"]
     expected = np.array([true["x"], true["y"], true["theta"]])
     assert np.allclose(team.transform, expected, atol=1e-3)
     assert report["oracle"] is True and report["merge"]["verified"]
-    assert report["merge"]["translation_error"] < 1e-3
-    assert report["merge"]["rotation_error"] < 1e-2
+    assert report["merge"]["worst_translation_error_m"] < 1e-3
+    assert report["merge"]["worst_rotation_error_deg"] < 1e-2
 
 
 def test_oracle_transform_is_the_start_poses_relation(tmp_path: Path) -> None:
@@ -73,7 +73,7 @@ def test_oracle_transform_is_the_start_poses_relation(tmp_path: Path) -> None:
     env.reset()
     starts = env.simulator.starts
     report = run_experiment(_config(tmp_path, oracle=True, max_steps=1))
-    true = report["merge"]["true_transform"]
+    true = report["merge"]["robots"]["robot_1"]["true_transform"]
     expected = compose(inverse(starts[0]), starts[1])
     assert np.allclose([true["x"], true["y"], true["theta"]], expected, atol=1e-3)
 
@@ -194,11 +194,11 @@ def test_a_team_run_goes_on_after_coverage_until_its_merge_is_verified(tmp_path:
     went_on = run_experiment(_config(tmp_path, max_steps=400, name="b"))
     merge = went_on["merge"]
     assert went_on["until_merged"] and merge["verified"]
-    assert went_on["coverage_step"] == 40 and went_on["t90"] == stopped["t90"]
+    assert went_on["coverage_step"] == 40 and went_on["t90_s"] == stopped["t90_s"]
     # Stopped at the first coverage check after the merge was verified.
-    assert merge["step_verified"] <= went_on["steps"] < merge["step_verified"] + 20
+    assert merge["step_first_joined"] <= went_on["steps"] < merge["step_first_joined"] + 20
     assert went_on["steps_after_coverage"] == went_on["steps"] - 40
-    assert not is_wrong(merge["translation_error"], merge["rotation_error"])
+    assert not is_wrong(merge["worst_translation_error_m"], merge["worst_rotation_error_deg"])
 
 
 def test_a_team_run_with_no_merge_under_way_stops_after_the_idle_steps(tmp_path: Path) -> None:

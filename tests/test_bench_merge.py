@@ -227,7 +227,9 @@ def test_resolve_methods_rejects_unknown_names() -> None:
 def test_cli_bad_input_exits_2(capsys) -> None:
     assert main(["bench", "merge", "--methods", "bogus"]) == 2
     assert "unknown method 'bogus'" in capsys.readouterr().err
-    assert main(["bench", "merge", "--pairs", "0"]) == 2
+    with pytest.raises(SystemExit) as exit_info:  # refused by argparse, before any work
+        main(["bench", "merge", "--pairs", "0"])
+    assert exit_info.value.code == 2
 
 
 # --- the feature-based baseline -------------------------------------------------------------

@@ -179,9 +179,12 @@ def test_cut_config_rejects_bad_values() -> None:
 
 
 def test_cli_rejects_bad_cut_arguments_in_one_line(capsys) -> None:
-    assert main(["bench", "merge", "--set", "cuts", "--cut-pairs", "0"]) == 2
+    with pytest.raises(SystemExit) as exit_info:  # refused by argparse, before any work
+        main(["bench", "merge", "--set", "cuts", "--cut-pairs", "0"])
+    assert exit_info.value.code == 2
     err = capsys.readouterr().err
-    assert err == "mrslam: error: --cut-pairs must be >= 1, got 0\n"
+    expected = "argument --cut-pairs: must be an integer >= 1, got 0"
+    assert err == f"mrslam bench merge: error: {expected}\n"
     with pytest.raises(SystemExit) as exit_info:
         main(["bench", "merge", "--set", "slices"])
     assert exit_info.value.code == 2

@@ -105,10 +105,11 @@ def test_merge_prints_the_transform_and_exits_0(capsys, pair_files: PairFiles) -
     status, out, err = run_cli(capsys, "merge", pair_files.map1, pair_files.map2)
     assert status == 0, err
     match = re.search(
-        r"map1_from_map2: x (-?\d+\.\d+) m, y (-?\d+\.\d+) m, theta (-?\d+\.\d+) rad", out
+        r"map1_from_map2: x (-?\d+\.\d+) m, y (-?\d+\.\d+) m, theta (-?\d+\.\d+)°", out
     )
     assert match is not None, out
-    estimate = np.array([float(v) for v in match.groups()])
+    x, y, degrees = (float(v) for v in match.groups())
+    estimate = np.array([x, y, np.radians(degrees)])
     translation, rotation = relative_transform_error(estimate, TRUTH, known_centroid(pair_files.m2))
     assert translation <= TOLERANCE_M and rotation <= ONE_DEGREE
     assert "merged: acceptance index" in out

@@ -100,7 +100,7 @@ def test_full_experiment_writes_its_report(tmp_path: Path) -> None:
     run_dir = tmp_path / "out" / "run"
     report = json.loads((run_dir / "report.json").read_text())
     assert report["steps"] == 30
-    assert f"30 steps ({report['sim_time']} s simulated)" in out
+    assert f"30 steps ({report['sim_time_s']} s simulated)" in out
     assert "no verified merge" in out  # far too early to meet
     for name in ("robot_0.yaml", "robot_1.yaml", "figure.png", "recording.rrd"):
         assert (run_dir / name).is_file()

@@ -13,12 +13,18 @@ from test_recording import Recording
 
 from agents.team import TeamCoordinator
 from scenarios.cli import main
-from scenarios.experiment import OUTPUT_FILES, RunConfig, prepare_run_dir, run_experiment
+from scenarios.experiment import (
+    OUTPUT_FILES,
+    RunConfig,
+    prepare_run_dir,
+    release_run_dir,
+    run_experiment,
+)
 
 
-def test_a_new_or_empty_folder_is_used_as_named(tmp_path: Path) -> None:
+def test_a_new_folder_is_used_as_named_an_existing_one_never(tmp_path: Path) -> None:
     assert prepare_run_dir(tmp_path, "a") == tmp_path / "a"
-    assert prepare_run_dir(tmp_path, "a") == tmp_path / "a"  # still empty
+    assert prepare_run_dir(tmp_path, "a") == tmp_path / "a-2"  # even while still empty
 
 
 def test_a_used_folder_is_never_mixed_the_run_goes_to_the_next_number(tmp_path: Path) -> None:
@@ -36,6 +42,7 @@ def test_overwrite_deletes_the_earlier_outputs_and_nothing_else(tmp_path: Path) 
     for name in [*OUTPUT_FILES, "robot_0.yaml", "robot_0.pgm", "robot_1.yaml", "notes.txt"]:
         (folder / name).write_text("old")
     assert prepare_run_dir(tmp_path, "a", overwrite=True) == folder
+    release_run_dir(folder)
     assert sorted(p.name for p in folder.iterdir()) == ["notes.txt"]
 
 
@@ -85,7 +92,7 @@ def test_ctrl_c_keeps_the_steps_done_and_closes_the_recording(monkeypatch, tmp_p
     recording = Recording(tmp_path / "r" / "recording.rrd")  # a closed, readable file
     events = " ".join(str(v) for v in recording.column("/events", "TextLog:text"))
     assert "interrupted (SIGINT) after 15 steps" in events
-    assert not (tmp_path / "r" / ".recording.part.rrd").exists()
+    assert not list((tmp_path / "r").glob(".*"))  # no partial recording, no run marker
     assert (tmp_path / "r" / "robot_0.yaml").exists() and (tmp_path / "r" / "figure.png").exists()
 
 
@@ -106,7 +113,8 @@ def test_a_signal_ends_the_run_in_one_line_with_its_exit_status(
     err = capsys.readouterr().err
     assert code == status
     name = signal.Signals(signum).name
-    assert f"interrupted by {name} after 10 steps" in err and err.count("\n") == 1, err
+    # The handler only notes the signal: the step it came in is finished, then the run stops.
+    assert f"interrupted by {name} after 11 steps" in err and err.count("\n") == 1, err
     report = json.loads((tmp_path / "office-seed0" / "report.json").read_text())
     assert report["complete"] is False and report["interrupted"] == name
 
@@ -116,7 +124,7 @@ def test_overwrite_keeps_files_that_only_look_like_robot_maps(tmp_path: Path) ->
     folder.mkdir()
     for name in ["robot_0.yaml", "robot_12.pgm", "robot_0.yaml.bak", "robot_notes.pam"]:
         (folder / name).write_text("old")
-    prepare_run_dir(tmp_path, "a", overwrite=True)
+    release_run_dir(prepare_run_dir(tmp_path, "a", overwrite=True))
     assert sorted(p.name for p in folder.iterdir()) == ["robot_0.yaml.bak", "robot_notes.pam"]
 
 
@@ -127,17 +135,7 @@ def test_a_crash_closes_the_recording_and_leaves_no_partial_file(monkeypatch, tm
     interrupt_at(monkeypatch, 6, crash)
     with pytest.raises(RuntimeError, match="boom"):
         run_experiment(RunConfig(out=tmp_path, name="r", max_steps=50, progress=False))
-    assert not (tmp_path / "r" / ".recording.part.rrd").exists()
-
-
-def test_signals_are_deferred_while_the_outputs_are_written() -> None:
-    from scenarios.experiment import _signals_deferred
-
-    before = signal.getsignal(signal.SIGTERM)
-    with _signals_deferred():
-        assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
-        os.kill(os.getpid(), signal.SIGTERM)  # ignored: the block runs to its end
-    assert signal.getsignal(signal.SIGTERM) is before
+    assert not list((tmp_path / "r").glob(".*"))  # no partial recording, no run marker
 
 
 def test_overwrite_refuses_to_delete_the_input_map(capsys, tmp_path: Path) -> None:

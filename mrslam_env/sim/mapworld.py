@@ -34,6 +34,8 @@ from mrslam_env.sim.starts import START_MARGIN, start_cells
 from mrslam_env.sim.world import WorldSpec
 
 __all__ = [
+    "MAX_WORLD_CELLS",
+    "check_world_extent",
     "cover_rectangles",
     "outline_segments",
     "wall_mask",
@@ -45,6 +47,32 @@ FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
 _START_SAMPLE = 512  # candidate cells compared pairwise when choosing far-apart starts
+
+MAX_WORLD_CELLS = 25_000_000
+"""The largest world a run simulates, as its extent in cells at the grid resolution the
+run maps it with (0.05 m: the SLAM maps, the ground truth and the coverage reach are
+grids over the world's extent). 25 M cells is 250 x 250 m at 0.05 m: 13 times a large
+80 x 60 m floor (1.92 M cells; a 100-step run of it peaked at 0.44 GB, one of
+160 x 120 m, 7.7 M cells, at 0.8 GB: about 60 bytes a cell)."""
+
+
+def check_world_extent(bounds: tuple[float, float, float, float], resolution: float) -> None:
+    """Refuse, before anything is allocated, a world whose extent ``bounds`` (xmin, ymin,
+    xmax, ymax, m) at ``resolution`` (m/cell) is over :data:`MAX_WORLD_CELLS` cells.
+
+    Raises
+    ------
+    ValueError
+        One line with the world's size, its cells and the limit.
+    """
+    width, height = bounds[2] - bounds[0], bounds[3] - bounds[1]
+    cells = math.ceil(width / resolution - 1e-9) * math.ceil(height / resolution - 1e-9)
+    if cells > MAX_WORLD_CELLS:
+        raise ValueError(
+            f"world of {width:,.0f} x {height:,.0f} m is {cells:,} cells at {resolution:g} m; "
+            f"the limit is {MAX_WORLD_CELLS:,} cells (e.g. 250 x 250 m): use a map with a "
+            "smaller extent (check its resolution)"
+        )
 
 
 def wall_mask(grid: GridMap, *, unknown_as_wall: bool = True) -> BoolArray:

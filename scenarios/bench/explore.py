@@ -91,6 +91,7 @@ __all__ = [
     "run_explore_benchmark",
     "run_row",
     "summarise_reports",
+    "upgrade_report",
 ]
 
 DEFAULT_SCENARIOS = ("office", "warehouse", "maze", "twin_wings", "procedural-0")
@@ -178,9 +179,32 @@ def _task(task: Task) -> dict[str, Any]:
     return report
 
 
+OLD_REPORT_KEYS = {"sim_time": "sim_time_s", "wall_time": "wall_time_s", "t90": "t90_s"}
+"""Top-level keys of the reports written before units were in the key names (issue 36)."""
+OLD_MERGE_KEYS = {
+    "translation_error": "worst_translation_error_m",
+    "rotation_error": "worst_rotation_error_deg",
+    "step_verified": "step_first_joined",
+}
+"""The same in ``merge``: the old ``translation_error`` / ``rotation_error`` were already
+the worst over the joined robots (m, °), ``step_verified`` the first robot's join."""
+
+
+def upgrade_report(report: dict[str, Any]) -> dict[str, Any]:
+    """A run report with the current key names, also when an earlier version wrote it
+    (``bench explore --from`` reads the reports an earlier ``--out`` kept)."""
+    renamed = {OLD_REPORT_KEYS.get(key, key): value for key, value in report.items()}
+    merge = report.get("merge")
+    if isinstance(merge, dict):
+        renamed["merge"] = {OLD_MERGE_KEYS.get(key, key): value for key, value in merge.items()}
+    return renamed
+
+
 def run_row(report: dict[str, Any]) -> dict[str, Any]:
     """The benchmark's row of one run, from its report (as :func:`_task` returns it and
-    ``--out`` keeps it)."""
+    ``--out`` keeps it; old key names too, :func:`upgrade_report`). The row's times are in
+    s, its errors in m and °."""
+    report = upgrade_report(report)
     bench = report["bench"]
     mode, robots = bench["mode"], bench["robots"]
     merge = report["merge"]
@@ -193,13 +217,15 @@ def run_row(report: dict[str, Any]) -> dict[str, Any]:
         "policy": report["policy"],
         "robots": robots,
         "joined": merge.get("joined", int(merge["verified"])),
-        "t90": report["t90"],
-        "t90_or_limit": report["t90"] if report["t90"] is not None else bench["max_steps"] * 0.1,
+        "t90": report["t90_s"],
+        "t90_or_limit": report["t90_s"]
+        if report["t90_s"] is not None
+        else bench["max_steps"] * 0.1,
         "verified": merge["verified"],
-        "translation_error": merge["translation_error"],
-        "rotation_error": merge["rotation_error"],
+        "translation_error": merge["worst_translation_error_m"],
+        "rotation_error": merge["worst_rotation_error_deg"],
         "hypotheses_tested": merge["hypotheses_tested"],
-        "step_verified": merge["step_verified"],
+        "step_verified": merge["step_first_joined"],
         "verified_before_t90": _verified_before_t90(report),
         "seeking_steps": merge.get("seeking_steps", 0),
         "rendezvous_steps": merge.get("rendezvous_steps"),
@@ -208,18 +234,18 @@ def run_row(report: dict[str, Any]) -> dict[str, Any]:
         "steps": report["steps"],
         "collision_steps": sum(collisions[agent] for agent in moving),
         "robot_steps": report["steps"] * len(moving),
-        "wall_time": report["wall_time"],
+        "wall_time": report["wall_time_s"],
     }
 
 
 def _verified_before_t90(report: dict[str, Any]) -> bool:
     """Whether the run verified its merge before its maps covered 90 % (or verified it
     in a run that never got there)."""
-    step = report["merge"]["step_verified"]
+    step = report["merge"]["step_first_joined"]
     if step is None:
         return False
-    t90 = report["t90"]
-    return t90 is None or step * report["sim_time"] / max(report["steps"], 1) <= t90
+    t90 = report["t90_s"]
+    return t90 is None or step * report["sim_time_s"] / max(report["steps"], 1) <= t90
 
 
 def _report_name(report: dict[str, Any]) -> str:
@@ -246,7 +272,8 @@ def run_explore_benchmark(
     ``policy`` (``module:factory``) too; returns (summary rows per scenario and policy,
     per-run rows). ``robots``: the team sizes, one summary row per scenario and size.
 
-    ``ray``: run as Ray tasks (``""`` a local instance, else a cluster address;
+    ``ray``: run as Ray tasks (``""`` a local instance, or the cluster ``RAY_ADDRESS``
+    names; else a cluster address; the ``MRSLAM_*`` variables reach the workers;
     :mod:`scenarios.sweep`) instead of the process pool; the rows are the same. ``out``: a
     new (or empty) folder that keeps every run's report, ``reports/<run>.json``, as it
     arrives, and the table, ``explore.md``, and ``summary.json`` at the end;

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 import statistics
@@ -366,12 +367,13 @@ def write_rows(path: Path, rows: Sequence[dict[str, Any]], extra: dict[str, Any]
     e.g. the summary and the manifest's generation figures)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    if path.suffix.lower() == ".csv":
-        with path.open("w", newline="") as handle:
-            fields = list(dict.fromkeys(key for row in rows for key in row)) or ["pair_id"]
-            writer = csv.DictWriter(handle, fieldnames=fields, restval="")
-            writer.writeheader()
-            writer.writerows(rows)
+    if path.suffix.lower() == ".csv":  # built in memory, then written atomically
+        text = io.StringIO(newline="")
+        fields = list(dict.fromkeys(key for row in rows for key in row)) or ["pair_id"]
+        writer = csv.DictWriter(text, fieldnames=fields, restval="")
+        writer.writeheader()
+        writer.writerows(rows)
+        write_text_atomic(path, text.getvalue())
     else:
         write_text_atomic(path, json.dumps({**extra, "rows": list(rows)}, indent=2, default=float))
     return path
