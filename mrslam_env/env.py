@@ -143,7 +143,7 @@ import functools
 import os
 import sys
 import types
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import replace
 from typing import Any, ClassVar
 
@@ -768,18 +768,19 @@ def checked_seed(seed: Any) -> int | None:
 
 
 def checked_options(options: Any) -> dict[str, Any]:
-    """``reset``'s ``options`` as a dict of the :data:`RESET_OPTIONS` keys.
+    """``reset``'s ``options`` (any mapping: a dict, ``types.MappingProxyType``, ...) as a
+    dict of the :data:`RESET_OPTIONS` keys.
 
     Raises
     ------
     ValueError
         For a key that is not one of :data:`RESET_OPTIONS` (a misspelled option would
-        otherwise change nothing, silently), or options that are not a dict.
+        otherwise change nothing, silently), or options that are not a mapping.
     """
     if options is None:
         return {}
-    if not isinstance(options, dict):
-        raise ValueError(f"reset options must be a dict or None, got {options!r}")
+    if not isinstance(options, Mapping):
+        raise ValueError(f"reset options must be a mapping or None, got {options!r}")
     unknown = [key for key in options if key not in (*RESET_OPTIONS, PETTINGZOO_PROBE_OPTION)]
     if unknown:
         raise ValueError(

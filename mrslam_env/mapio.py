@@ -162,9 +162,10 @@ RGBA bitmap) of a :data:`MAX_GRID_CELLS` image, plus 1 MiB of header."""
 ORIGIN_PRECISION = 1e-5
 """An origin is refused where float64 cannot hold a cell: the spacing of float64 numbers at
 the map's farthest corner (``max(|x|, |y|)`` of the origin plus the image's diagonal) must be
-under this fraction of the resolution. At 0.05 m/cell that allows corners up to about
-2e9 m from 0 (an origin of 1e15 m is off by 0.125 m, 2.5 cells); real maps' origins are
-hundreds of metres."""
+under this fraction of the resolution. At 0.05 m/cell (a bound of 5e-7 m) that allows
+corners up to 2**32 m, about 4.3e9 m, from 0 (the spacing is 4.8e-7 m below 2**32 and
+9.5e-7 m from there; an origin of 1e15 m is off by 0.125 m, 2.5 cells); real maps' origins
+are hundreds of metres."""
 
 _PNM_HEADER_BYTES = 1 << 16
 

@@ -15,13 +15,17 @@
 Exit codes: 0 done; 2 bad input (unknown scenario, unreadable map, bad values, an output
 that would overwrite an input), printed as one line ``mrslam: error: ...``; 3 ``mrslam
 merge`` found no confident merge (the transform is null and the reason is printed); 1 an
-unexpected failure (one line; ``--debug`` shows the traceback); 130 / 143 interrupted by
-Ctrl-C / SIGTERM.
+unexpected failure (one line; ``--debug`` shows the traceback); 130 / 143 / 129
+interrupted by Ctrl-C (SIGINT) / SIGTERM / SIGHUP (the terminal or ssh session closed),
+128 + the signal's number as shells report it (a run's report is marked incomplete).
 
 Outputs: every command that writes checks its outputs before any work: an output that is
 one of its inputs (a map YAML or its image, also through links) or cannot be written is
-refused, and an existing output is refused unless ``--overwrite`` (``mrslam run`` and
-``bench explore --out`` go to a new or empty folder instead).
+refused, and an existing output is refused unless ``--overwrite``. Folders: ``mrslam run``
+never writes into an existing folder: it creates ``<out>/<name>``, or the next free
+``<name>-2``, ``<name>-3``, … when that exists (``--overwrite`` reuses ``<out>/<name>``
+instead, deleting only the earlier run's outputs; scenarios/experiment.py); ``bench
+explore --out`` refuses an existing folder that is not empty.
 """
 
 from __future__ import annotations
@@ -46,8 +50,14 @@ __all__ = ["main"]
 EXIT_FAILURE = 1
 EXIT_BAD_INPUT = 2
 EXIT_NO_MERGE = 3
-EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report it
+EXIT_HUNG_UP = 129  # 128 + SIGHUP (terminal or ssh session closed), as shells report it
+EXIT_INTERRUPTED = 130  # 128 + SIGINT
 EXIT_TERMINATED = 143  # 128 + SIGTERM
+
+
+def _exit_signalled(name: str) -> int:
+    """The exit status of a command ended by the signal ``name`` (e.g. ``"SIGTERM"``)."""
+    return {"SIGHUP": EXIT_HUNG_UP, "SIGINT": EXIT_INTERRUPTED}.get(name, EXIT_TERMINATED)
 
 
 def _count(text: str) -> int:
@@ -357,12 +367,16 @@ def _build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    # SIGINT and SIGTERM only note the signal, from before the heavy imports to the last
-    # line printed; the run looks at the note between its setup phases and its steps
+    # SIGINT, SIGTERM and SIGHUP only note the signal, from before the heavy imports (the
+    # console script) or from here (main() called from a program) to the last line
+    # printed; the run looks at the note between its setup phases and its steps
     # (scenarios/experiment.py, "Interrupted runs"), so no handler ever raises inside a
-    # numba kernel or a callback, and no signal is lost.
-    with interrupts.noting_signals():
-        return _run(args)
+    # numba kernel or a callback, and no signal is lost. The note ends with the command.
+    try:
+        with interrupts.noting_signals():
+            return _run(args)
+    finally:
+        interrupts.end_console_script()
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -417,7 +431,7 @@ def _run(args: argparse.Namespace) -> int:
             f"{done} in {report['outputs']['run_dir']}",
             file=sys.stderr,
         )
-        return EXIT_INTERRUPTED if interrupted == "SIGINT" else EXIT_TERMINATED
+        return _exit_signalled(interrupted)
     return 0
 
 
@@ -669,8 +683,6 @@ def _run_bench_explore(
     unknown = [mode for mode in modes if mode not in MODES]
     if not modes or unknown:
         raise ValueError(f"--modes must name some of {', '.join(MODES)}, got {args.modes!r}")
-    if args.out is not None:
-        check_output_folder(args.out, "--out")
     return run_explore_benchmark(
         args.scenarios or DEFAULT_SCENARIOS,
         range(args.seeds),
@@ -862,16 +874,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         "bench": _cmd_bench,
     }
     try:
-        if args.command != "run":  # the other commands stop by KeyboardInterrupt
-            interrupts.restore()
-            interrupts.raise_if_received()
+        if args.command != "run":
+            # The other commands stop by KeyboardInterrupt: the console script's handlers
+            # give way, and a signal noted while the modules loaded ends the command now.
+            # (Only the console script's own note: main() called from a program checks
+            # nothing it did not install.)
+            signum = interrupts.end_console_script()
+            if signum is not None:
+                raise interrupts.RunInterrupted(signum)
         return handlers[args.command](args)
     except KeyboardInterrupt as stop:
         name = getattr(stop, "signal_name", "SIGINT")
         before = args.command == "run" and isinstance(stop, interrupts.RunInterrupted)
         detail = " before the run folder was made; nothing written" if before else ""
         print(f"mrslam: interrupted by {name}{detail}", file=sys.stderr)
-        return EXIT_INTERRUPTED if name == "SIGINT" else EXIT_TERMINATED
+        return _exit_signalled(name)
     except (ValueError, OSError, MemoryError) as error:
         if args.debug:
             raise
@@ -925,35 +942,6 @@ def check_outputs(
                 pass
         except OSError as error:
             raise ValueError(f"cannot write in {output.parent} ({error.strerror})") from None
-
-
-def check_output_folder(folder: Path, option: str) -> None:
-    """Refuse, before any work, an output folder that is not new or empty or that cannot be
-    created or written (``option`` names it in the message).
-
-    Raises
-    ------
-    ValueError
-        Naming the folder and the problem.
-    """
-    folder = Path(folder)
-    if folder.exists():
-        if not folder.is_dir():
-            raise ValueError(f"{option} {folder}: exists and is not a folder")
-        if any(folder.iterdir()):
-            raise ValueError(f"{option} {folder}: already exists and is not an empty folder")
-        where = folder
-    else:
-        where = folder.parent
-        while not where.exists() and where != where.parent:
-            where = where.parent
-        if not where.is_dir():
-            raise ValueError(f"{option} {folder}: cannot be created, {where} is not a folder")
-    try:  # the only sure test of "can be written here" is writing
-        with tempfile.TemporaryFile(dir=where):
-            pass
-    except OSError as error:
-        raise ValueError(f"{option} {folder}: cannot write in {where} ({error.strerror})") from None
 
 
 if __name__ == "__main__":

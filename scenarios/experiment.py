@@ -26,26 +26,31 @@ one, is never claimed. With ``overwrite=True`` (``--overwrite``) the run reuses 
 ``<out>/<name>`` instead, after deleting the outputs of the earlier run there (the files
 named above and temporaries a crashed run left; nothing else is touched). Either way the
 run holds its folder with a marker file, ``.mrslam-run``, created with ``O_EXCL`` and
-removed when the run ends: ``--overwrite`` refuses a folder whose marker exists (a run is
-writing there; after a run killed with SIGKILL, delete the marker by hand). Before
-``--overwrite`` deletes anything, every input file (``--map``'s YAML and its image,
-resolved through links) is checked; one inside the run folder is refused. Temporary names
-are unique per process (``.recording.<pid>.part.rrd``; the other outputs through
-:func:`mrslam_env.atomic.atomic_path`).
+removed when the run ends, also when it fails: ``--overwrite`` refuses a folder whose
+marker names a live process, or one of another host (a run is writing there); a marker
+naming a process of this host that no longer exists (a run killed with SIGKILL) is stale
+and is replaced. Before ``--overwrite`` deletes anything, every input file (``--map``'s
+YAML and its image, resolved through links) is checked; one that it would delete (an
+earlier run's output name, in the run folder) is refused, and any other file is never
+touched. Temporary names are unique per process (``.recording.<pid>.part.rrd``; the other
+outputs through :func:`mrslam_env.atomic.atomic_path`).
 
-**Interrupted runs.** SIGINT (Ctrl-C) and SIGTERM only note the signal
-(:mod:`scenarios.interrupts`); the run looks at the note between setup phases and between
-steps, never inside one. A signal before the run folder is claimed (while the world, the
-env and its kernels load) ends the run with nothing written (:class:`RunInterrupted`); once
-the folder exists, the run stops stepping and writes the outputs of the steps done, with
-``"complete": false`` and ``"interrupted": "SIGINT"`` (or ``"SIGTERM"``) in
-``report.json``, and the recording closed so that it verifies. A signal while the outputs
-are written lets them finish and marks the report the same way: every run folder gets a
-``report.json``, and no signal is lost.
+**Interrupted runs.** SIGINT (Ctrl-C), SIGTERM and SIGHUP (the terminal or ssh session
+closed) only note the signal (:mod:`scenarios.interrupts`); the run looks at the note
+between setup phases and between steps, never inside one. A signal before the run folder
+is claimed (while the world, the env and its kernels load) ends the run with nothing
+written (:class:`RunInterrupted`); once the folder exists, the run stops stepping and
+writes the outputs of the steps done, with ``"complete": false`` and ``"interrupted":
+"SIGINT"`` (or ``"SIGTERM"``, ``"SIGHUP"``) in ``report.json``, and the recording closed so
+that it verifies. A signal while the outputs are written lets them finish and marks the
+report the same way: every run folder gets a ``report.json``, and no signal is lost (what
+a Python caller then sees: :func:`run_experiment`).
 
-**Too large a world** is refused before anything is allocated
+**Too large a world** is refused before the world is built
 (:func:`mrslam_env.sim.mapworld.check_world_extent`: the world's extent at the SLAM
-resolution, at most 25 M cells).
+resolution, at most 25 M cells): a map's extent is checked as soon as the map file is read
+(:func:`resolve_world`), so nothing of the world's size is allocated but the map's own
+cells (which :mod:`mrslam_env.mapio` bounds).
 
 **The report** (``report.json``). Quantities carry their unit in the key: ``sim_time_s``,
 ``wall_time_s``, ``t90_s``, ``ate_m``, ``translation_error_m``, ``rotation_error_deg``
@@ -141,37 +146,94 @@ def input_files(map_path: Path | None) -> list[Path]:
     return [Path(map_path), *map_images(map_path)]
 
 
+def deleted_by_overwrite(name: str) -> bool:
+    """Whether ``--overwrite`` deletes a file of this name in the run folder (an earlier
+    run's output or a temporary a crashed run left; the names a run writes are among
+    them)."""
+    return bool(name in OUTPUT_FILES or ROBOT_MAP.fullmatch(name) or LEFTOVERS.fullmatch(name))
+
+
 def check_inputs_outside(folder: Path, inputs: Sequence[Path]) -> None:
-    """Refuse (``ValueError``, one line) when an input file, resolved through links, lies
-    in ``folder``: ``--overwrite`` would delete it or write beside it."""
+    """Refuse (``ValueError``, one line) an input file that ``--overwrite`` would delete
+    (or a run would write over): one that, resolved through links, lies directly in
+    ``folder`` under a name :func:`deleted_by_overwrite`. Any other file there (e.g. the
+    map's ``world.yaml``) is never touched, and is read as an input."""
     inside = Path(folder).resolve()
     for path in inputs:
         resolved = Path(path).resolve()
-        if inside in resolved.parents:
+        if resolved.parent == inside and deleted_by_overwrite(resolved.name):
             link = "" if resolved == Path(path).absolute() else f" (through a link, {resolved})"
             raise ValueError(
-                f"--overwrite would delete the input map file {path}: it is in the run folder "
-                f"{folder}{link}; copy it elsewhere or choose another --name"
+                f"--overwrite would delete the input map file {path}: it is the earlier run's "
+                f"{resolved.name} in the run folder {folder}{link}; copy it elsewhere or "
+                "choose another --name"
             )
+
+
+_HOLDER = re.compile(r"pid (\d+) on (.+)")
+"""The marker's text: the process holding the folder and its host."""
 
 
 def _hold(folder: Path) -> None:
     """Create the run marker in ``folder`` (``O_EXCL``); ``ValueError`` when another run
-    holds the folder."""
+    holds the folder. A marker left by a process that no longer exists on this host (a run
+    killed with SIGKILL) is stale: it is removed and the marker created once more."""
     marker = folder / RUN_MARKER
-    try:
-        descriptor = os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-    except FileExistsError:
+    for attempt in range(2):
         try:
-            holder = marker.read_text(encoding="utf-8").strip() or "unknown"
-        except OSError:
-            holder = "unknown"
-        raise ValueError(
-            f"run folder {folder} is held by another run ({holder}); if no run is using it, "
-            f"delete {marker}"
-        ) from None
-    with os.fdopen(descriptor, "w", encoding="utf-8") as file:
-        file.write(f"pid {os.getpid()} on {socket.gethostname()}\n")
+            descriptor = os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            try:
+                holder = marker.read_text(encoding="utf-8")
+            except FileNotFoundError:  # its run let go meanwhile
+                holder = ""
+            except OSError:
+                holder = "unknown"
+            if attempt == 0 and (not holder or _remove_stale(marker, holder)):
+                continue
+            raise ValueError(
+                f"run folder {folder} is held by another run ({holder.strip() or 'unknown'}); "
+                f"if no run is using it, delete {marker}"
+            ) from None
+        try:
+            with os.fdopen(descriptor, "w", encoding="utf-8") as file:
+                file.write(f"pid {os.getpid()} on {socket.gethostname()}\n")
+        except BaseException:  # the marker is ours: never leave it behind
+            marker.unlink(missing_ok=True)
+            raise
+        return
+
+
+def _remove_stale(marker: Path, holder: str) -> bool:
+    """Remove ``marker`` when its text ``holder`` names a process of this host that no
+    longer exists; True when it is gone. Stale markers are removed one run at a time (an
+    exclusive ``flock`` on the folder, held for the check and the removal), and only the
+    marker read: one that another run has meanwhile replaced by its own is kept."""
+    found = _HOLDER.fullmatch(holder.strip())
+    if found is None or found[2] != socket.gethostname():
+        return False
+    try:
+        os.kill(int(found[1]), 0)
+    except ProcessLookupError:
+        pass  # no such process: stale
+    except (OSError, OverflowError):  # alive under another user, or no pid at all
+        return False
+    else:
+        return False
+    import fcntl  # POSIX, as the pid check is
+
+    descriptor = os.open(marker.parent, os.O_RDONLY)
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX)  # released as the descriptor closes
+        try:
+            if marker.read_text(encoding="utf-8") != holder:
+                return False  # a run removed the stale one and took the folder
+        except FileNotFoundError:
+            return True  # a run removed the stale one
+        marker.unlink()
+        return True
+    finally:
+        os.close(descriptor)
 
 
 def release_run_dir(run_dir: Path) -> None:
@@ -202,10 +264,13 @@ def prepare_run_dir(
     if overwrite and folder.is_dir():
         check_inputs_outside(folder, inputs)
         _hold(folder)
-        for old in folder.iterdir():
-            earlier = old.name in OUTPUT_FILES or ROBOT_MAP.fullmatch(old.name)
-            if earlier or LEFTOVERS.fullmatch(old.name):
-                old.unlink(missing_ok=True)
+        try:
+            for old in folder.iterdir():
+                if deleted_by_overwrite(old.name):
+                    old.unlink(missing_ok=True)
+        except BaseException:  # e.g. an output's name taken by a folder: let go of it
+            release_run_dir(folder)
+            raise
         return folder
     out.mkdir(parents=True, exist_ok=True)
     index = 1
@@ -299,11 +364,23 @@ class RunConfig:
             raise ValueError(f"robots must be an integer from 2 to 8, got {robots!r}")
 
 
-def resolve_world(scenario: str, map_path: Path | None, seed: int = 0) -> WorldSpec:
-    """The world of a scenario name, or of a ROS map file when one is given."""
+def resolve_world(
+    scenario: str, map_path: Path | None, seed: int = 0, *, resolution: float = 0.05
+) -> WorldSpec:
+    """The world of a scenario name, or of a ROS map file when one is given.
+
+    A map's extent at ``resolution`` (m/cell: the finest grid the run makes of its world)
+    is checked (:func:`mrslam_env.sim.mapworld.check_world_extent`) as soon as the map is
+    read, before its world is built: too large a world is refused (``ValueError``) before
+    anything of its size but the map's own cells is allocated."""
     if map_path is None:
         return build_world(scenario)
     grid = load_map(map_path)
+    # The world's bounds are the grid's extent grown by one cell on every side.
+    rows, cols = grid.cells.shape
+    x0, y0 = grid.origin[0] - grid.resolution, grid.origin[1] - grid.resolution
+    bounds = (x0, y0, x0 + (cols + 2) * grid.resolution, y0 + (rows + 2) * grid.resolution)
+    check_world_extent(bounds, resolution)
     return world_from_map(grid, name=f"map:{Path(map_path).name}", rng=np.random.default_rng(seed))
 
 
@@ -384,15 +461,30 @@ def _grid_resolution(env_config: EnvConfig) -> float:
 def run_experiment(config: RunConfig) -> dict[str, Any]:
     """Run one experiment, write its outputs, return the report (also ``report.json``).
 
-    SIGINT and SIGTERM are noted, not raised, while it runs (main thread only; the module
-    docstring's interrupted runs). Called from Python without the CLI, a signal noted is
-    sent again once the run has written its outputs and the caller's handlers are back
-    (Ctrl-C then raises ``KeyboardInterrupt`` in the caller, after the run).
+    SIGINT, SIGTERM and SIGHUP are noted, not raised, while it runs (main thread only; the
+    module docstring's interrupted runs). Called from Python in the main thread (not from
+    the CLI, not inside another :func:`scenarios.interrupts.noting_signals` block), a
+    signal noted is sent again once the run has ended and the caller's handlers are back
+    (:func:`scenarios.interrupts.noting_signals` with ``redeliver``), whether the run
+    returned or raised:
+
+    - SIGINT under Python's own handler raises ``KeyboardInterrupt`` in the caller, after
+      the run (it replaces the run's exception, if any: a :class:`RunInterrupted`, or e.g.
+      an ``OSError`` while the outputs were written, which is its ``__context__``);
+    - a signal whose handler is ``SIG_DFL`` (SIGTERM's and SIGHUP's default) ends the
+      process by that signal, after the outputs are written (none when it came before
+      the run folder was claimed): the caller sees no exception and no return;
+    - a handler of the caller's is called; when it returns, the run's report is returned
+      (or its exception raised, e.g. :class:`RunInterrupted`).
+
+    In a worker thread, or inside the CLI or another noting block, nothing is sent again:
+    the run returns its report marked ``"interrupted"``, or raises :class:`RunInterrupted`.
 
     Raises
     ------
     RunInterrupted
-        A signal came before the run folder was claimed (nothing was written).
+        A signal came before the run folder was claimed (nothing was written) and was not
+        sent again, or its handler (the caller's) returned.
     ValueError
         Bad input: an unknown scenario, an unreadable map, too large a world, an input
         ``--overwrite`` would delete, a folder another run holds.
@@ -402,14 +494,15 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
 
 
 def _run_experiment(config: RunConfig) -> dict[str, Any]:
-    world = resolve_world(config.scenario, config.map_path, config.seed)
+    comm = CommConfig() if config.comm else CommConfig(comm_range=1e-9)
+    env_config = EnvConfig(max_cycles=config.max_steps, comm=comm)
+    resolution = _grid_resolution(env_config)
+    world = resolve_world(config.scenario, config.map_path, config.seed, resolution=resolution)
     name = config.name or f"{world.name.replace(':', '_')}-seed{config.seed}"
     inputs = input_files(config.map_path)
     if config.overwrite:  # bad input is refused before any work
         check_inputs_outside(Path(config.out) / name, inputs)
-    comm = CommConfig() if config.comm else CommConfig(comm_range=1e-9)
-    env_config = EnvConfig(max_cycles=config.max_steps, comm=comm)
-    check_world_extent(world.bounds, _grid_resolution(env_config))
+    check_world_extent(world.bounds, resolution)  # a scenario's world, too
     check_policy(config.policy, env_config)
     # Setup, phase by phase; a signal noted in one ends the run before the next, with no
     # folder claimed (the kernels load here: a signal waits for the kernel to return).
@@ -434,10 +527,11 @@ def _run_experiment(config: RunConfig) -> dict[str, Any]:
     counted = [0] if config.single else list(range(len(agents)))
     idle = np.zeros(2, dtype=np.float32)
     raise_if_received()
-    # From here on the run holds its folder, and the folder always gets a report.
-    run_dir = prepare_run_dir(Path(config.out), name, overwrite=config.overwrite, inputs=inputs)
-    recording_part = partial_recording(run_dir)
+    # From here on the run holds its folder, and the folder always gets a report
+    # (prepare_run_dir lets go of the folder itself when it fails).
     recorder: Recorder | None = None
+    run_dir = prepare_run_dir(Path(config.out), name, overwrite=config.overwrite, inputs=inputs)
+    recording_part = partial_recording(run_dir)  # a name only
     try:
         # Each robot's SLAM poses (map frame) and true poses (world), every step, for its ATE.
         slam_poses: list[list[FloatArray]] = [[observations[a]["pose"]] for a in agents]

@@ -11,13 +11,22 @@ follows ``ray.init``'s conventions (:func:`ray_init_arguments`):
   ``"ray://head:10001"``, ...) joins that cluster, whose workers must have mrslam
   installed.
 
-Joining, the driver uses token authentication when a token is at hand (``RAY_AUTH_TOKEN``,
-``RAY_AUTH_TOKEN_PATH`` or ``~/.ray/auth_token``) and ``RAY_AUTH_MODE`` is not set: the
-rule ``ray start --head`` applied on this machine. Since Ray 2.59 the first local
-``ray.init()`` writes ``~/.ray/auth_token``, and a later ``ray start --head`` finds it and
-turns token authentication on, while ``ray.init(address="HOST:PORT")`` by itself only
-uses tokens with ``RAY_AUTH_MODE=token``, so it was refused. A token sent to a cluster
-without authentication does no harm; ``RAY_AUTH_MODE=disabled`` opts out.
+Joining a cluster on this machine, the driver uses token authentication when a token is at
+hand (``RAY_AUTH_TOKEN``, ``RAY_AUTH_TOKEN_PATH`` or ``~/.ray/auth_token``) and
+``RAY_AUTH_MODE`` is not set: the rule ``ray start --head`` applied here. Since Ray 2.59 the
+first local ``ray.init()`` writes ``~/.ray/auth_token``, and a later ``ray start --head``
+finds it and turns token authentication on, while ``ray.init(address="HOST:PORT")`` by
+itself only uses tokens with ``RAY_AUTH_MODE=token``: joining the address that
+``ray start --head`` printed failed after 20 s of ``Unauthenticated`` lines. The token goes
+only where it came from (:func:`uses_local_token`): to an address whose host is this machine
+(a loopback address, or a name or address that resolves only to addresses of this
+machine's own interfaces). A cluster elsewhere, by ``ADDRESS``, ``ray://`` or
+``RAY_ADDRESS``, gets Ray's own rule: an explicit address never sends the token unless
+``RAY_AUTH_MODE=token`` says so. ``RAY_AUTH_MODE=disabled`` opts out here too. Ray turns
+token mode on through the process environment (``RAY_AUTH_MODE=token``) and its cached
+configuration; both are put back when the sweep ends (if Ray's private configuration call
+ever fails, the cached mode stays on for the rest of the process). If that Ray code moves or
+changes, the sweep falls back to Ray's own behaviour.
 
 The workers get the run's environment that a task may read: every variable whose name
 starts with ``MRSLAM_`` (e.g. ``MRSLAM_SB3_MODEL``, the model examples/sb3_policy.py
@@ -26,9 +35,13 @@ worker's machine: give absolute paths there. (The process pool's workers inherit
 whole environment.)
 
 A task that raises stops the sweep with :class:`TaskError`: which task, and the worker's
-own error line (``ValueError: ...``), the same from the pool and from Ray. It is a
-``RuntimeError``, never the cause's type (Ray's ``RayTaskError`` subclasses it): a
+own error line (``ValueError: ...``), the same from the pool and from Ray; so does a Ray
+worker that dies (``WorkerCrashedError``, ``OutOfMemoryError``, ...: any ``RayError``). It is
+a ``RuntimeError``, never the cause's type (Ray's ``RayTaskError`` subclasses it): a
 ``ValueError`` in a worker is a failed run, not bad input to the command (exit 1, not 2).
+The other tasks are stopped at once, not waited for: the pool cancels those not started
+and terminates its worker processes (SIGTERM, then SIGKILL after
+:data:`POOL_STOP_GRACE_S`), so no run is left behind; Ray cancels the remaining tasks.
 
 Each task is a module-level function and a picklable argument tuple, so the same task
 runs in either engine and gives the same row: the table is the same whichever ran it (a
@@ -37,21 +50,29 @@ test checks that).
 
 from __future__ import annotations
 
+import contextlib
+import ipaddress
+import logging
 import os
 import reprlib
+import socket
+import time
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from multiprocessing import get_context
 from typing import Any, TypeVar
+from urllib.parse import urlsplit
 
 __all__ = [
+    "POOL_STOP_GRACE_S",
     "RAY_ENV_PREFIX",
     "RAY_EXTRA",
     "TaskError",
     "ray_env_vars",
     "ray_init_arguments",
     "run_tasks",
+    "uses_local_token",
 ]
 
 T = TypeVar("T")
@@ -62,6 +83,12 @@ RAY_EXTRA = "pip install 'mrslam[ray]'"
 
 RAY_ENV_PREFIX = "MRSLAM_"
 """The environment variables whose names start with this reach the Ray workers."""
+
+POOL_STOP_GRACE_S = 5.0
+"""After a failed task, how long the pool's running workers have to end after SIGTERM (a
+run notes the signal and ends at its next step; scenarios/interrupts.py) before SIGKILL."""
+
+_AUTH_MODE = "RAY_AUTH_MODE"
 
 
 class TaskError(RuntimeError):
@@ -96,8 +123,10 @@ def run_tasks(
     Raises
     ------
     TaskError
-        When a task raises (the first in task order for the pool, the first to finish
-        for Ray); the tasks not yet started are cancelled.
+        When a task raises, or its Ray worker dies (the first in task order for the pool,
+        the first to finish for Ray). The other tasks are not waited for: those not yet
+        started are cancelled, and those running end with the sweep (the pool terminates
+        its workers; Ray cancels them).
     ValueError
         For ``jobs < 1``, or ``ray`` without Ray installed.
     """
@@ -116,7 +145,7 @@ def run_tasks(
             except BrokenProcessPool:
                 raise
             except Exception as error:
-                pool.shutdown(wait=True, cancel_futures=True)
+                _stop_pool(pool)
                 raise _task_failed(index, len(tasks), tasks[index], _error_line(error)) from error
             results.append(result)
             if on_result is not None:
@@ -146,17 +175,98 @@ def ray_init_arguments(address: str, jobs: int, environ: Mapping[str, str]) -> d
     }
 
 
-def _use_token_if_available() -> None:
-    """Join with token authentication when ``RAY_AUTH_MODE`` is unset and a token is at
-    hand: Ray's own rule for ``ray start --head`` and ``ray.init("auto")``, which
-    ``ray.init("HOST:PORT")`` does not apply (module notes)."""
+def _stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Cancel the tasks not started and end the running ones now, without waiting for
+    them (``shutdown(wait=True)`` would wait minutes for runs whose rows are not used):
+    SIGTERM to every worker, SIGKILL to those alive after :data:`POOL_STOP_GRACE_S`, and
+    each one joined, so none is left running. (What Python 3.14's
+    ``terminate_workers`` does, and a bounded wait after it.)"""
+    # shutdown() forgets the processes: take them first (a private attribute; Python
+    # 3.14's terminate_workers reads it the same way).
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+    deadline = time.monotonic() + POOL_STOP_GRACE_S
+    for process in processes:
+        process.join(max(0.0, deadline - time.monotonic()))
+        if process.is_alive():
+            process.kill()
+            process.join()
+
+
+def uses_local_token(address: str, environ: Mapping[str, str]) -> bool:
+    """Whether ``--ray ADDRESS`` joins with this machine's Ray token (module notes): only
+    when the cluster's address (``address``, or ``RAY_ADDRESS`` for ``""`` and
+    ``"auto"``) names this machine. ``"local"``, and ``"auto"`` or ``""`` without
+    ``RAY_ADDRESS``, are left to Ray (a new local instance, or the local cluster Ray
+    finds, where Ray applies the same rule itself)."""
+    target = address if address not in ("", "auto") else environ.get("RAY_ADDRESS", "")
+    if target in ("", "auto", "local"):
+        return False
+    host = urlsplit("//" + target.split("://", 1)[-1]).hostname
+    return bool(host) and _is_this_machine(str(host))
+
+
+def _is_this_machine(host: str) -> bool:
+    """``host`` resolves, and only to loopback addresses or addresses of this machine's
+    own interfaces (a socket binds to it); a name that does not resolve is not."""
     try:
-        from ray._private.authentication.authentication_token_setup import (
-            maybe_enable_token_auth_if_token_available,
-        )
-    except ImportError:  # Ray before token authentication (2.52), or it moved
+        found = socket.getaddrinfo(host, None, type=socket.SOCK_DGRAM)
+    except (OSError, UnicodeError):
+        return False
+    return bool(found) and all(_is_own_address(info[0], info[4]) for info in found)
+
+
+def _is_own_address(family: int, sockaddr: Any) -> bool:
+    try:
+        if ipaddress.ip_address(str(sockaddr[0]).split("%")[0]).is_loopback:
+            return True
+    except ValueError:
+        return False
+    try:
+        with socket.socket(family, socket.SOCK_DGRAM) as probe:
+            probe.bind(sockaddr)  # port 0: only an address of this machine binds
+    except OSError:
+        return False
+    return True
+
+
+def _use_local_token() -> None:
+    """Turn token authentication on for this process, as Ray does for the local cluster it
+    finds, when ``RAY_AUTH_MODE`` is unset and a token is at hand (module notes). Ray's
+    private function: any failure of it (Ray before 2.52, moved, changed) leaves Ray's own
+    behaviour; its warning, meant for ``ray start``, is not shown."""
+    try:
+        from ray._private.authentication import authentication_token_setup as setup
+
+        logger = logging.getLogger(setup.__name__)
+        level = logger.level
+        logger.setLevel(logging.ERROR)
+        try:
+            setup.maybe_enable_token_auth_if_token_available(warn_if_disabled=False)
+        finally:
+            logger.setLevel(level)
+    except Exception:  # a fallback to Ray's own behaviour, by design
         return
-    maybe_enable_token_auth_if_token_available(warn_if_disabled=False)
+
+
+def _restore_auth_mode(before: str | None) -> None:
+    """Put ``RAY_AUTH_MODE`` back as it was before the sweep joined, and Ray's cached
+    configuration with it (after ``ray.shutdown``: nothing uses it any more)."""
+    if os.environ.get(_AUTH_MODE) == before:
+        return
+    if before is None:
+        os.environ.pop(_AUTH_MODE, None)
+    else:
+        os.environ[_AUTH_MODE] = before
+    try:
+        from ray._raylet import Config  # type: ignore[attr-defined]  # not in its stub
+
+        Config.initialize("")  # Ray re-reads RAY_AUTH_MODE
+    except Exception:  # then the cached mode stays (module notes)
+        return
 
 
 def _run_on_ray(
@@ -168,42 +278,68 @@ def _run_on_ray(
 ) -> list[R]:
     try:
         import ray
-        from ray.exceptions import RayTaskError
+        from ray.exceptions import RayError, RayTaskError
     except ImportError as error:
         raise ValueError(f"--ray needs Ray: {RAY_EXTRA}") from error
     started = not ray.is_initialized()
-    if started:
-        arguments = ray_init_arguments(address, jobs, os.environ)
-        if arguments.get("address") != "local":
-            _use_token_if_available()
-        ray.init(**arguments)
+    auth_mode = os.environ.get(_AUTH_MODE)
     try:
-        options: dict[str, Any] = {"num_cpus": 1, "max_retries": 0}
-        env_vars = ray_env_vars(os.environ)
-        if env_vars:
-            options["runtime_env"] = {"env_vars": env_vars}
-        remote = ray.remote(**options)(function)
-        pending = {remote.remote(task): index for index, task in enumerate(tasks)}
-        results: dict[int, R] = {}
-        while pending:
-            done, _ = ray.wait(list(pending), num_returns=1)
-            for ref in done:
-                index = pending.pop(ref)
-                try:
-                    result = ray.get(ref)
-                except RayTaskError as error:
-                    for other in pending:
-                        ray.cancel(other)
-                    cause = error.cause if isinstance(error.cause, BaseException) else None
-                    line = _error_line(cause) if cause is not None else _last_line(error)
-                    raise _task_failed(index, len(tasks), tasks[index], line) from error
-                results[index] = result
-                if on_result is not None:
-                    on_result(result)
-        return [results[index] for index in range(len(tasks))]
+        if started:
+            arguments = ray_init_arguments(address, jobs, os.environ)
+            if uses_local_token(address, os.environ):
+                _use_local_token()
+            ray.init(**arguments)
+        try:
+            return _ray_results(ray, function, tasks, on_result, RayError, RayTaskError)
+        finally:
+            if started:
+                ray.shutdown()
     finally:
         if started:
-            ray.shutdown()
+            _restore_auth_mode(auth_mode)
+
+
+def _ray_results(
+    ray: Any,
+    function: Callable[[T], R],
+    tasks: Sequence[T],
+    on_result: Callable[[R], None] | None,
+    ray_error: type[BaseException],
+    ray_task_error: type[BaseException],
+) -> list[R]:
+    options: dict[str, Any] = {"num_cpus": 1, "max_retries": 0}
+    env_vars = ray_env_vars(os.environ)
+    if env_vars:
+        options["runtime_env"] = {"env_vars": env_vars}
+    remote = ray.remote(**options)(function)
+    pending = {remote.remote(task): index for index, task in enumerate(tasks)}
+    results: dict[int, R] = {}
+    while pending:
+        done, _ = ray.wait(list(pending), num_returns=1)
+        for ref in done:
+            index = pending.pop(ref)
+            try:
+                result = ray.get(ref)
+            except ray_error as error:
+                for other in pending:
+                    # Best effort: the job's tasks end anyway as the driver disconnects.
+                    with contextlib.suppress(Exception):
+                        ray.cancel(other)
+                line = _ray_error_line(error, ray_task_error)
+                raise _task_failed(index, len(tasks), tasks[index], line) from error
+            results[index] = result
+            if on_result is not None:
+                on_result(result)
+    return [results[index] for index in range(len(tasks))]
+
+
+def _ray_error_line(error: BaseException, ray_task_error: type[BaseException]) -> str:
+    """The worker's own error line for a ``RayTaskError``; the error's first line for
+    the others (``WorkerCrashedError: The worker died unexpectedly ...``)."""
+    if not isinstance(error, ray_task_error):
+        return _error_line(error)
+    cause = getattr(error, "cause", None)
+    return _error_line(cause) if isinstance(cause, BaseException) else _last_line(error)
 
 
 def _last_line(error: BaseException) -> str:

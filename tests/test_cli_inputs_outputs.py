@@ -89,6 +89,7 @@ def test_bench_help_in_a_real_process(tmp_path: Path) -> None:
         text=True,
         cwd=Path(__file__).resolve().parents[1],
         check=False,
+        timeout=120,  # TimeoutExpired (the process killed) rather than a hang
     )
     assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
     assert "90 % coverage" in done.stdout or "90% coverage" in done.stdout
@@ -180,7 +181,7 @@ def test_bench_explore_checks_its_out_folder_before_the_benchmark(
 ) -> None:
     import scenarios.bench.explore as explore
 
-    monkeypatch.setattr(explore, "run_explore_benchmark", no_work)
+    monkeypatch.setattr(explore, "run_tasks", no_work)
     monkeypatch.chdir(tmp_path)
     (tmp_path / "full").mkdir()
     (tmp_path / "full" / "kept.json").write_text("{}")

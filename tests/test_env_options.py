@@ -3,7 +3,10 @@ peers, the ``peer`` and ``comm`` parts of its observation sized for 0 teammates.
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import replace
+from types import MappingProxyType
+from typing import Any
 
 import gymnasium
 import numpy as np
@@ -12,7 +15,7 @@ from pettingzoo.test import parallel_api_test
 
 from agents.single_robot import SingleRobotEnv
 from mrslam_env.config import EnvConfig
-from mrslam_env.env import MultiRobotSlamEnv, parallel_env
+from mrslam_env.env import MultiRobotSlamEnv, checked_options, parallel_env
 from mrslam_env.wrappers import SINGLE_ROBOT_ID
 
 SMALL = "tb3_sandbox"
@@ -31,6 +34,30 @@ def test_a_misspelled_reset_option_is_refused_by_name_with_the_known_ones() -> N
     env.reset(seed=0, options={"randomize_starts": True, "scenario": SMALL})
     env.reset(seed=0, options={})
     env.reset(seed=0, options=None)
+
+
+def test_any_mapping_is_accepted_as_options_and_checked_by_name_too() -> None:
+    # dict(options) took any mapping before the names were checked: so does the check.
+    for options in (
+        MappingProxyType({"randomize_starts": True}),
+        OrderedDict(randomize_starts=True),
+    ):
+        assert checked_options(options) == {"randomize_starts": True}
+    assert checked_options(MappingProxyType({})) == {}
+    with pytest.raises(ValueError, match="unknown reset option 'randomise_starts'"):
+        checked_options(MappingProxyType({"randomise_starts": True}))
+    with pytest.raises(ValueError, match="must be a mapping or None"):
+        checked_options([("randomize_starts", True)])
+    # And reset itself: a read-only mapping gives the same episode as the dict.
+    env = parallel_env(scenario=SMALL, seed=0, config=FAST)
+    from_dict, _ = env.reset(seed=4, options={"randomize_starts": True})
+    # (reset is annotated dict, as PettingZoo's is; any mapping works.)
+    proxy: Any = MappingProxyType({"randomize_starts": True})
+    from_proxy, _ = env.reset(seed=4, options=proxy)
+    assert from_proxy.keys() == from_dict.keys()
+    for agent, observation in from_dict.items():
+        for part, value in observation.items():
+            np.testing.assert_array_equal(from_proxy[agent][part], value)
 
 
 def test_the_single_robot_env_refuses_a_misspelled_option_too() -> None:
@@ -55,6 +82,7 @@ def test_the_known_options_are_those_the_card_documents() -> None:
 def test_one_robot_has_empty_peer_and_comm_parts_and_passes_the_api_test() -> None:
     env = MultiRobotSlamEnv(scenario=SMALL, n_robots=1, seed=3, config=FAST)
     space = env.observation_space("robot_0")
+    assert isinstance(space, gymnasium.spaces.Dict)
     assert space["peer"].shape == (0, 4)
     assert space["comm"].shape == (0,)
     assert env.action_space("robot_0").shape == (2,)

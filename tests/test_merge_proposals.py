@@ -240,7 +240,7 @@ def test_a_fit_covering_little_of_the_smaller_map_is_refused(seed: int) -> None:
         assert result.transform is None
         assert "of the smaller map (< 20%)" in result.reason, result.reason
         best = result.hypotheses[0]
-        assert best.confident and best.agreement.overlap_fraction < 0.17
+        assert best.confident  # refused for its coverage alone, not for doubt
         moved, _ = relative_transform_error(best.map1_from_map2, TRUTH, known_centroid(m2))
         assert moved > 1.0  # it was indeed wrong
 

@@ -49,7 +49,7 @@ def three_robot_report(tmp_path_factory: pytest.TempPathFactory) -> dict[str, An
                 given[k - 1] += offset
             start(given, maps)
 
-        team.start_coordinated = shifted  # type: ignore[method-assign]
+        team.start_coordinated = shifted  # type: ignore[method-assign,assignment]
         return team
 
     patch = pytest.MonkeyPatch()
@@ -156,3 +156,98 @@ def test_bench_explore_reads_new_and_old_reports_alike(three_robot_report, tmp_p
         (tmp_path / name / "reports").mkdir(parents=True)
         (tmp_path / name / "reports" / "r.json").write_text(json.dumps(report))
     assert summarise_reports(tmp_path / "old") == summarise_reports(tmp_path / "new")
+
+
+def _old_two_robot_report(verified: bool) -> dict[str, Any]:
+    """A two-robot team report as the version before issue 36 wrote it (9e7e1c6): no
+    ``merge.joined`` and no ``merge.robots``; robot_1's transform and errors at the top of
+    ``merge``; ``sim_time`` / ``wall_time`` / ``t90`` and ``step_verified``."""
+    pose = {"x": 1.2, "y": -0.4, "theta": 0.3}
+    merge: dict[str, Any] = {
+        "verified": verified,
+        "transform": pose if verified else None,
+        "true_transform": {"x": 1.25, "y": -0.38, "theta": 0.31},
+        "translation_error": 0.0539 if verified else None,
+        "rotation_error": 0.573 if verified else None,
+        "hypotheses_tested": 3,
+        "step_verified": 812 if verified else None,
+        "seeking_steps": 140,
+        "sighting_hypotheses": 1,
+        "first_hypothesis_step": 400,
+        "first_rendezvous_step": 650,
+        "rendezvous_steps": 162,
+        "radio_rejections": 0,
+    }
+    if verified:
+        merge["preliminary_transform"] = {"x": 1.21, "y": -0.41, "theta": 0.29}
+    return {
+        "complete": True,
+        "interrupted": None,
+        "scenario": "maze",
+        "seed": 3,
+        "steps": 1500,
+        "sim_time": 150.0,
+        "wall_time": 61.234,
+        "interaction": True,
+        "comm": True,
+        "oracle": False,
+        "single": False,
+        "robots": 2,
+        "policy": "frontier",
+        "policy_spec": None,
+        "merge": merge,
+        "coverage": {"merged": 0.9612, "robot_0": 0.71, "robot_1": 0.66},
+        "t90": 120.5,
+        "until_merged": True,
+        "coverage_step": 1400,
+        "steps_after_coverage": 100,
+        "coverage_curve": [[1500, 0.9612]],
+        "slam": {r: {"ate": 0.05, "map_agreement": 0.97} for r in ("robot_0", "robot_1")},
+        "merged_map_accuracy": 0.95 if verified else None,
+        "collision_steps": {"robot_0": 2, "robot_1": 1},
+        "team_state": "coordinated" if verified else "exploring",
+        "decisions": [],
+        "outputs": {"run_dir": "runs/maze-seed3"},
+        "bench": {
+            "index": 0,
+            "scenario": "maze",
+            "seed": 3,
+            "max_steps": 1500,
+            "mode": "team",
+            "policy_spec": None,
+            "robots": 2,
+        },
+    }
+
+
+@pytest.mark.parametrize("verified", [True, False])
+def test_bench_explore_reads_a_real_old_two_robot_report(verified: bool) -> None:
+    row = run_row(_old_two_robot_report(verified))
+    assert row["joined"] == int(verified) and row["verified"] is verified
+    assert row["translation_error"] == (0.0539 if verified else None)
+    assert row["rotation_error"] == (0.573 if verified else None)
+    assert row["step_verified"] == (812 if verified else None)
+    # Step 812 of 1500 (150 s) is 81.2 s, before t90 = 120.5 s.
+    assert row["verified_before_t90"] is verified
+    assert row["t90"] == 120.5 and row["t90_or_limit"] == 120.5
+    assert row["wall_time"] == 61.234 and row["steps"] == 1500
+    assert row["collision_steps"] == 3 and row["robot_steps"] == 3000
+    assert row["seeking_steps"] == 140 and row["rendezvous_steps"] == 162
+    assert row["coverage"] == 0.9612
+
+
+def test_an_old_two_robot_report_reads_as_the_new_one(tmp_path: Path) -> None:
+    from scenarios.bench.explore import upgrade_report
+
+    old = _old_two_robot_report(True)
+    upgraded = upgrade_report(old)
+    assert upgraded["sim_time_s"] == 150.0 and upgraded["t90_s"] == 120.5
+    merge = upgraded["merge"]
+    assert merge["worst_translation_error_m"] == 0.0539
+    assert merge["worst_rotation_error_deg"] == 0.573
+    assert merge["step_first_joined"] == 812
+    assert "translation_error" not in merge and "step_verified" not in merge
+    (tmp_path / "reports").mkdir()
+    (tmp_path / "reports" / "r.json").write_text(json.dumps(old))
+    summary, runs = summarise_reports(tmp_path)  # summarised, not refused
+    assert runs == [run_row(old)] and summary

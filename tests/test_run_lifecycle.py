@@ -22,7 +22,7 @@ import pytest
 
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
 from mrslam_env.mapio import save_map
-from scenarios import experiment
+from scenarios import experiment, interrupts
 from scenarios.cli import main
 from scenarios.experiment import prepare_run_dir, release_run_dir
 
@@ -158,15 +158,100 @@ def test_overwrite_refuses_when_an_input_file_lies_in_the_run_folder(
     assert (folder / "merged.pgm").exists() and (folder / "merged.yaml").exists()
 
 
+def test_overwrite_keeps_an_input_it_would_not_delete(tmp_path: Path) -> None:
+    # The map's own files in the run folder are read and never touched: only an input
+    # under an output's name (which --overwrite deletes) is refused.
+    folder = tmp_path / "x"
+    world = small_map(folder, "world")
+    inputs = experiment.input_files(world)
+    (folder / "report.json").write_text("{}")  # the earlier run's
+    assert prepare_run_dir(tmp_path, "x", overwrite=True, inputs=inputs) == folder
+    release_run_dir(folder)
+    assert sorted(p.name for p in folder.iterdir()) == ["world.pgm", "world.yaml"]
+    earlier = small_map(folder, "robot_0")  # an earlier run's map, read as the input
+    with pytest.raises(ValueError, match=r"would delete the input map file .*robot_0"):
+        prepare_run_dir(tmp_path, "x", overwrite=True, inputs=experiment.input_files(earlier))
+    assert earlier.exists() and not (folder / experiment.RUN_MARKER).exists()
+
+
+def test_a_failed_overwrite_lets_go_of_the_folder(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    # An output's name taken by a folder: deleting it fails after the marker was made.
+    folder = tmp_path / "x"
+    (folder / "report.json").mkdir(parents=True)
+    argv = ["run", "--out", str(tmp_path), "--name", "x", "--overwrite", "--max-steps", "1"]
+    assert main([*argv, "--no-record"]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    assert not (folder / experiment.RUN_MARKER).exists()
+    (folder / "report.json").rmdir()
+    assert prepare_run_dir(tmp_path, "x", overwrite=True) == folder  # not "held"
+    release_run_dir(folder)
+
+
+def test_a_marker_that_cannot_be_written_is_not_left(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    def full(*args: Any, **kwargs: Any) -> Any:
+        raise OSError(28, "No space left on device")
+
+    (tmp_path / "x").mkdir()
+    with monkeypatch.context() as patch:
+        patch.setattr(experiment.os, "fdopen", full)
+        with pytest.raises(OSError, match="No space"):
+            prepare_run_dir(tmp_path, "x", overwrite=True)
+    assert not (tmp_path / "x" / experiment.RUN_MARKER).exists()
+
+
+def _dead_pid() -> int:
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    child.wait(timeout=DEADLINE_S)
+    return child.pid
+
+
+def test_a_stale_marker_of_a_dead_run_is_replaced(tmp_path: Path) -> None:
+    import socket
+
+    folder = tmp_path / "x"
+    folder.mkdir()
+    marker = folder / experiment.RUN_MARKER
+    marker.write_text(f"pid {_dead_pid()} on {socket.gethostname()}\n")  # killed by SIGKILL
+    assert prepare_run_dir(tmp_path, "x", overwrite=True) == folder
+    assert marker.read_text() == f"pid {os.getpid()} on {socket.gethostname()}\n"
+    assert [p.name for p in folder.iterdir()] == [experiment.RUN_MARKER]  # nothing aside
+    release_run_dir(folder)
+    # A live process on this host, or any on another host, still holds the folder.
+    host = socket.gethostname()
+    for holder in (f"pid {os.getppid()} on {host}", f"pid {_dead_pid()} on not-{host}"):
+        marker.write_text(holder + "\n")
+        with pytest.raises(ValueError, match="held by another run"):
+            prepare_run_dir(tmp_path, "x", overwrite=True)
+        assert marker.read_text() == holder + "\n"
+
+
+def test_runs_racing_for_a_stale_folder_only_one_holds_it(tmp_path: Path) -> None:
+    import socket
+
+    folder = tmp_path / "a"
+    folder.mkdir()
+    (folder / experiment.RUN_MARKER).write_text(f"pid {_dead_pid()} on {socket.gethostname()}\n")
+    claimed = _race(6, lambda: prepare_run_dir(tmp_path, "a", overwrite=True))
+    held = [c for c in claimed if isinstance(c, Path)]
+    assert held == [folder], claimed
+    assert [p.name for p in folder.iterdir()] == [experiment.RUN_MARKER]
+
+
 # --- 4: signals --------------------------------------------------------------------------
 
 
 def _with_python_handlers() -> dict[int, Any]:
     """Python's own Ctrl-C handler, as in a console script (a test runner's worker may have
     replaced it); returns the handlers to put back."""
-    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    signums = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    previous: dict[int, Any] = {s: signal.getsignal(s) for s in signums}
     signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
     return previous
 
 
@@ -237,7 +322,8 @@ def test_a_signal_before_the_loop_still_leaves_a_marked_report(
 def test_a_signal_before_the_run_folder_is_claimed_leaves_nothing(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    # SIGINT while the env is built (the kernels load): no folder yet, nothing written.
+    # SIGINT while the team is built (after the env and its kernels): no folder yet,
+    # nothing written.
     _kill_self_when(monkeypatch, experiment, "build_team", signal.SIGINT)
     status = _run_main(["run", "--max-steps", "100", "--no-record", "--out", str(tmp_path)])
     err = capsys.readouterr().err
@@ -330,16 +416,138 @@ def test_sigint_while_the_command_is_imported_is_one_line(tmp_path: Path) -> Non
     assert not (tmp_path / "out").exists()
 
 
+def test_sighup_ends_a_run_as_sigterm_does(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    # The terminal or the ssh session closed: the run ends with its report marked, exit 129.
+    _kill_self_when(monkeypatch, experiment, "Recorder", signal.SIGHUP)
+    status = _run_main(["run", "--max-steps", "100", "--out", str(tmp_path), "--name", "r"])
+    err = capsys.readouterr().err
+    assert status == 129 and "mrslam: interrupted by SIGHUP after 0 steps" in err, err
+    report = json.loads((tmp_path / "r" / "report.json").read_text())
+    assert report["complete"] is False and report["interrupted"] == "SIGHUP"
+
+
+def test_a_signal_note_ends_with_the_block_that_installed_the_handlers(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    previous = _with_python_handlers()
+    try:
+        with interrupts.noting_signals():
+            os.kill(os.getpid(), signal.SIGTERM)
+            assert interrupts.received() == "SIGTERM"
+            # main() called from a program checks no note it did not make itself.
+            assert main(["scenarios"]) == 0
+            assert interrupts.received() == "SIGTERM"  # still the block's
+        assert interrupts.received() is None
+        assert main(["scenarios"]) == 0  # a later command in the process is not ended
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    assert "interrupted" not in capsys.readouterr().err
+
+
+def test_a_run_in_a_worker_thread_after_a_noted_signal_runs(tmp_path: Path) -> None:
+    previous = _with_python_handlers()
+    try:
+        with interrupts.noting_signals():
+            os.kill(os.getpid(), signal.SIGTERM)
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    config = experiment.RunConfig(
+        scenario="maze", out=tmp_path, name="r", max_steps=1, record=False, figure=False
+    )
+    with ThreadPoolExecutor(1) as pool:
+        report = pool.submit(experiment.run_experiment, config).result(timeout=DEADLINE_S)
+    assert report["complete"] is True and report["steps"] == 1
+
+
+def test_a_signal_noted_as_the_block_fails_is_not_lost() -> None:
+    # redeliver: the noted signal is sent again also when the block ends by an exception.
+    previous = _with_python_handlers()
+    calls: list[int] = []
+    try:
+        signal.signal(signal.SIGTERM, lambda signum, frame: calls.append(signum))
+        # The caller's handler is called and returns: the error goes on.
+        with pytest.raises(OSError, match="disk full"), interrupts.noting_signals(redeliver=True):
+            os.kill(os.getpid(), signal.SIGTERM)
+            raise OSError("disk full")
+        assert calls == [signal.SIGTERM]
+        # Python's own Ctrl-C handler: its KeyboardInterrupt replaces the error.
+        with pytest.raises(KeyboardInterrupt) as stop, interrupts.noting_signals(redeliver=True):
+            os.kill(os.getpid(), signal.SIGINT)
+            raise OSError("disk full")
+        assert isinstance(stop.value.__context__, OSError)
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def test_a_handler_installed_from_c_is_put_back_as_the_default(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    previous = _with_python_handlers()
+    try:
+        with monkeypatch.context() as patch:  # what signal.getsignal gives for a C handler
+            patch.setattr(signal, "getsignal", lambda signum: None)
+            assert interrupts.install()
+        interrupts.restore()
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_DFL
+        assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+    finally:
+        interrupts.restore()
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def test_the_console_scripts_note_ends_with_its_command() -> None:
+    # A signal while the modules load ends the first command; a later main() in the same
+    # process is not ended by it. An empty sys.argv installs nothing (and does not fail).
+    code = (
+        "import os, signal, sys\n"
+        "sys.argv = ['mrslam', 'scenarios']\n"
+        "import scenarios.cli as cli\n"
+        "os.kill(os.getpid(), signal.SIGTERM)\n"
+        "first = cli.main(['scenarios'])\n"
+        "second = cli.main(['scenarios'])\n"
+        "print(first, second, file=sys.stderr)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=DEADLINE_S
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stderr == "mrslam: interrupted by SIGTERM\n143 0\n"
+    code = (
+        "import signal, sys\n"
+        "sys.argv = []\n"
+        "import scenarios.cli\n"
+        "assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=DEADLINE_S
+    )
+    assert done.returncode == 0, done.stderr
+
+
 # --- 5: a world too large is refused before anything is allocated ----------------------------
 
 
 def test_a_map_whose_world_is_too_large_is_refused_up_front(
-    capsys: pytest.CaptureFixture[str], tmp_path: Path
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
     # 300 x 200 pixels at 3 m/px: a 900 x 600 m world, 18,000 x 12,000 cells at 0.05 m.
     cells = np.full((200, 300), FREE, dtype=np.int8)
     cells[:2], cells[-2:], cells[:, :2], cells[:, -2:] = OCCUPIED, OCCUPIED, OCCUPIED, OCCUPIED
     yaml_path = save_map(tmp_path / "huge.yaml", GridMap(cells=cells, resolution=3.0))
+
+    def never(*args: Any, **kwargs: Any) -> Any:
+        raise AssertionError("the world of a map too large was built")
+
+    monkeypatch.setattr(experiment, "world_from_map", never)  # refused before it is built
+    with pytest.raises(ValueError, match="25,000,000"):
+        experiment.resolve_world("office", yaml_path)
     status = main(["run", "--map", str(yaml_path), "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err
     assert status == 2 and err.count("\n") == 1, err

@@ -4,8 +4,11 @@
 from __future__ import annotations
 
 import json
+import os
 import posixpath
 import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -14,14 +17,15 @@ import pytest
 from scenarios.bench.explore import format_explore_table, run_explore_benchmark, summarise_reports
 from scenarios.bench.merge.pairs import PairGenerationConfig, generate_pairs
 from scenarios.cli import main
-from scenarios.sweep import run_tasks
+from scenarios.sweep import TaskError, run_tasks
 
 PATHS = ["a/b", "c/d", "e", "f/g/h"]
+basename: Callable[[str], str] = posixpath.basename  # one signature of the overloads
 
 
 def test_the_pool_returns_results_in_task_order_and_streams_each() -> None:
     seen: list[str] = []
-    assert run_tasks(posixpath.basename, PATHS, jobs=2, on_result=seen.append) == [
+    assert run_tasks(basename, PATHS, jobs=2, on_result=seen.append) == [
         "b",
         "d",
         "e",
@@ -31,18 +35,58 @@ def test_the_pool_returns_results_in_task_order_and_streams_each() -> None:
 
 
 def test_no_tasks_give_no_results() -> None:
-    assert run_tasks(posixpath.basename, [], jobs=1) == []
+    assert run_tasks(basename, [], jobs=1) == []
 
 
 def test_jobs_below_one_are_refused() -> None:
     with pytest.raises(ValueError, match="jobs must be >= 1"):
-        run_tasks(posixpath.basename, PATHS, jobs=0)
+        run_tasks(basename, PATHS, jobs=0)
 
 
 def test_ray_missing_says_what_to_install(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
     with pytest.raises(ValueError, match=r"--ray needs Ray: pip install 'mrslam\[ray\]'"):
-        run_tasks(posixpath.basename, PATHS, ray="")
+        run_tasks(basename, PATHS, ray="")
+
+
+BLOCKED_S = 60.0
+"""How long the blocking task of the next test runs unless it is ended: the old pool
+waited for it, and then finished it."""
+
+
+def _fail_once_the_other_runs_or_block(task: tuple[str, str]) -> str:
+    """``("block", folder)``: note this process, then run until a file that never comes
+    (``BLOCKED_S`` at most) and note that it finished. ``("fail", folder)``: raise once
+    the blocking task runs (polled against a deadline)."""
+    role, folder = task
+    where = Path(folder)
+    deadline = time.monotonic() + BLOCKED_S
+    if role == "block":
+        (where / f"running-{os.getpid()}").touch()
+        while not (where / "never").exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        (where / "finished").touch()
+        return role
+    while not any(where.glob("running-*")) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    raise ValueError("failed on purpose")
+
+
+def test_a_failed_task_ends_the_running_ones_instead_of_waiting_for_them(
+    tmp_path: Path,
+) -> None:
+    tasks = [("fail", str(tmp_path)), ("block", str(tmp_path)), ("block", str(tmp_path))]
+    with pytest.raises(TaskError, match=r"task 1 of 3 .* ValueError: failed on purpose$"):
+        run_tasks(_fail_once_the_other_runs_or_block, tasks, jobs=2)
+    # The running task was ended, not waited for, and so were the others.
+    # (The third may have started too, in the worker the failed task freed.)
+    running = list(tmp_path.glob("running-*"))
+    assert 1 <= len(running) <= 2
+    assert not (tmp_path / "finished").exists()
+    for noted in running:
+        pid = int(noted.name.removeprefix("running-"))
+        with pytest.raises(ProcessLookupError):  # terminated and reaped: none left behind
+            os.kill(pid, 0)
 
 
 # --- bench explore: the same table from the pool, from Ray, and from kept reports ----------

@@ -285,7 +285,8 @@ def run_explore_benchmark(
     check_policy(policy, EnvConfig())
     policies = [None] if policy is None else [None, policy]
     if out is not None:
-        _check_out(out)
+        check_out_folder(out)
+        (out / "reports").mkdir(parents=True, exist_ok=True)
     tasks: list[Task] = [
         (index, *run)
         for index, run in enumerate(
@@ -318,11 +319,31 @@ def run_explore_benchmark(
     return rows, runs
 
 
-def _check_out(out: Path) -> None:
-    """``out`` must be a new or empty folder: a sweep never mixes its reports with another's."""
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise ValueError(f"--out {out}: already exists and is not an empty folder")
-    (out / "reports").mkdir(parents=True, exist_ok=True)
+def check_out_folder(out: Path) -> None:
+    """Refuse, before any run, an ``--out`` folder that is not new or empty (a sweep never
+    mixes its reports with another's) or that cannot be created or written.
+
+    Raises
+    ------
+    ValueError
+        Naming the folder and the problem.
+    """
+    out = Path(out)
+    if out.exists():
+        if not out.is_dir() or any(out.iterdir()):
+            raise ValueError(f"--out {out}: already exists and is not an empty folder")
+        where = out
+    else:
+        where = out.parent
+        while not where.exists() and where != where.parent:
+            where = where.parent
+        if not where.is_dir():
+            raise ValueError(f"--out {out}: cannot be created, {where} is not a folder")
+    try:  # the only sure test of "can be written here" is writing
+        with tempfile.TemporaryFile(dir=where):
+            pass
+    except OSError as error:
+        raise ValueError(f"--out {out}: cannot write in {where} ({error.strerror})") from None
 
 
 def summarise_reports(folder: Path) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
