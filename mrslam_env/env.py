@@ -210,7 +210,7 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         config: EnvConfig | None = None,
         max_cycles: int | None = None,
     ) -> None:
-        if not isinstance(n_robots, int) or n_robots < 1:
+        if not isinstance(n_robots, int) or isinstance(n_robots, bool) or n_robots < 1:
             raise ValueError(f"n_robots must be an int >= 1, got {n_robots!r}")
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(

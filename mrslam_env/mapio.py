@@ -58,6 +58,7 @@ import math
 import os
 import re
 import stat
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -318,9 +319,25 @@ def _read_pillow_grey(path: Path) -> NDArray[np.uint8]:
     from PIL import Image, UnidentifiedImageError
 
     try:
-        with Image.open(path) as opened:
+        # Pillow's own decompression-bomb limits (a warning, then an error, at other sizes
+        # than ours) give way to MAX_GRID_CELLS: the header's size is checked before load().
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            opened = Image.open(path)
+    except Image.DecompressionBombError as error:  # over twice Pillow's limit, so ours
+        pixels = re.search(r"\((\d+) pixels\)", str(error))
+        size = f"of {int(pixels[1]):,} pixels" if pixels else "over Pillow's limit"
+        raise MapFileError(path, f"image {size}; the limit is {MAX_GRID_CELLS:,}") from None
+    except UnidentifiedImageError as error:
+        raise MapFileError(path, "unreadable image: not a PGM or an image Pillow knows") from error
+    except (OSError, ValueError, SyntaxError) as error:
+        raise MapFileError(path, f"corrupt image: {error}") from error
+    try:
+        with opened:
             _check_image_size(path, *opened.size)
-            opened.load()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+                opened.load()
             mode = opened.mode
             if mode in ("I", "F") or mode.startswith("I;"):
                 raise MapFileError(

@@ -70,8 +70,11 @@ transparent unknown cells. Images are 2-D content: the 2-D views draw them, unli
 
 from __future__ import annotations
 
+import errno
 import math
+import shutil
 from collections.abc import Collection, Mapping, Sequence
+from contextlib import suppress
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Final, Literal, Self
@@ -93,6 +96,7 @@ __all__ = [
     "SPATIAL_ROOTS",
     "Bounds",
     "Recorder",
+    "RecordingError",
     "annotation_context",
     "default_blueprint",
     "grid_corner_pose",
@@ -508,6 +512,26 @@ def default_blueprint(
 
 
 # -- the recorder ------------------------------------------------------------------------
+
+
+class RecordingError(OSError):
+    """A recording could not be written (:meth:`Recorder.close`); ``errno`` is ``ENOSPC``
+    when the disk is full."""
+
+    @classmethod
+    def of(cls, path: Path, error: BaseException) -> RecordingError:
+        """The error of writing ``path`` that failed with ``error`` (rerun's, which names
+        no cause when its file-writer thread stopped: a folder with under 1 MiB free is
+        taken as full)."""
+        text = " ".join(str(error).split()) or type(error).__name__
+        full = "os error 28" in text or "No space left" in text
+        if not full:
+            with suppress(OSError):
+                full = shutil.disk_usage(Path(path).parent).free < 1 << 20
+        cause = "no space left on device" if full else text
+        made = cls(f"cannot write recording {path}: {cause}")  # str(): the message alone
+        made.errno = errno.ENOSPC if full else None
+        return made
 
 
 class Recorder:
@@ -1025,17 +1049,27 @@ class Recorder:
     def close(self) -> None:
         """Send the blueprint again, made for what was logged (views without content
         left out, each 2-D view zoomed to the maps logged in it, :attr:`bounds`), flush
-        everything to the file and close it. Idempotent."""
+        everything to the file and close it. Idempotent.
+
+        Raises
+        ------
+        RecordingError
+            The file could not be written (e.g. the disk is full: rerun's file writer
+            stops, and says why only in its log); one line naming the file and the cause.
+        """
         if self._closed:
             return
         self._closed = True
-        self._stream.send_blueprint(
-            default_blueprint(self.n_robots, self._bounds, logged=self._logged),
-            make_active=True,
-            make_default=True,
-        )
-        self._stream.flush()
-        self._stream.disconnect()
+        try:
+            self._stream.send_blueprint(
+                default_blueprint(self.n_robots, self._bounds, logged=self._logged),
+                make_active=True,
+                make_default=True,
+            )
+            self._stream.flush()
+            self._stream.disconnect()
+        except (RuntimeError, OSError) as error:
+            raise RecordingError.of(self.path, error) from error
 
     def __enter__(self) -> Self:
         return self

@@ -17,7 +17,19 @@ that would overwrite an input), printed as one line ``mrslam: error: ...``; 3 ``
 merge`` found no confident merge (the transform is null and the reason is printed); 1 an
 unexpected failure (one line; ``--debug`` shows the traceback); 130 / 143 / 129
 interrupted by Ctrl-C (SIGINT) / SIGTERM / SIGHUP (the terminal or ssh session closed),
-128 + the signal's number as shells report it (a run's report is marked incomplete).
+128 + the signal's number as shells report it.
+
+Signals (scenarios/interrupts.py): ``mrslam run`` notes the signal and stops between two
+steps, writes its outputs (the report marked incomplete) and exits 130 / 143 / 129. Any
+other command is ended by the signal at once: one line ``mrslam: interrupted by SIGINT``
+on stderr, then the process ends by the signal itself (shells report 130 / 143 / 129;
+Python's ``subprocess`` a returncode of -2 / -15 / -1). No Python exception is ever
+raised inside C code (a pymunk callback, a numba kernel), so none is swallowed and
+nothing crashes. Outputs are written under temporary names and renamed
+(mrslam_env/atomic.py), so an interrupted command never leaves a half-written output; a
+hidden temporary file (``.NAME.XXXX.part.EXT``) may remain, as after a kill. This holds
+for the ``mrslam`` console script; ``main()`` called from Python installs no such
+handler (a Ctrl-C there is Python's ``KeyboardInterrupt``: one line, status 130).
 
 Outputs: every command that writes checks its outputs before any work: an output that is
 one of its inputs (a map YAML or its image, also through links) or cannot be written is
@@ -875,13 +887,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     }
     try:
         if args.command != "run":
-            # The other commands stop by KeyboardInterrupt: the console script's handlers
-            # give way, and a signal noted while the modules loaded ends the command now.
-            # (Only the console script's own note: main() called from a program checks
-            # nothing it did not install.)
-            signum = interrupts.end_console_script()
-            if signum is not None:
-                raise interrupts.RunInterrupted(signum)
+            # As the console script, a signal ends any other command at once, by the signal
+            # itself, with one line (a signal noted while the modules loaded: now); never a
+            # KeyboardInterrupt inside C code (module docstring). main() called from a
+            # program installs nothing: there a Ctrl-C stays Python's KeyboardInterrupt.
+            interrupts.end_on_signals()
         return handlers[args.command](args)
     except KeyboardInterrupt as stop:
         name = getattr(stop, "signal_name", "SIGINT")

@@ -35,6 +35,19 @@ earlier run's output name, in the run folder) is refused, and any other file is 
 touched. Temporary names are unique per process (``.recording.<pid>.part.rrd``; the other
 outputs through :func:`mrslam_env.atomic.atomic_path`).
 
+**Run names.** ``name`` (``--name``) is one plain folder name: not empty, not ``.`` or
+``..``, no ``/`` (nor ``os.sep``, ``os.altsep``) and no NUL; any other is refused (one-line
+``ValueError``) before any work, as is an ``out`` that exists and is no folder. By default
+the name is ``<scenario>-seed<seed>``, or ``<stem>-seed<seed>`` for ``--map <stem>.yaml``.
+
+**A failed recording** (e.g. a full disk: rerun's writer stops) never stops the run from
+writing its other outputs: the partial recording is always deleted, ``report.json`` is
+written without ``outputs.recording`` and with the failure in ``errors`` (one line naming
+the file and the cause, ``[]`` when none), and then the run raises that failure, a
+:class:`mrslam_env.recording.RecordingError` (an ``OSError``: ``mrslam run`` exits 2).
+Any other failure while the outputs are written is raised as it is, after the recording
+is closed and its partial file deleted.
+
 **Interrupted runs.** SIGINT (Ctrl-C), SIGTERM and SIGHUP (the terminal or ssh session
 closed) only note the signal (:mod:`scenarios.interrupts`); the run looks at the note
 between setup phases and between steps, never inside one. A signal before the run folder
@@ -74,7 +87,7 @@ import re
 import socket
 import time
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -98,7 +111,7 @@ from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import GridMap
 from mrslam_env.mapio import load_map, map_images, save_map
 from mrslam_env.merge.fuse import fuse_all
-from mrslam_env.recording import Recorder
+from mrslam_env.recording import Recorder, RecordingError
 from mrslam_env.registry import build_world
 from mrslam_env.sim.mapworld import check_world_extent, world_from_map
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
@@ -109,6 +122,8 @@ __all__ = [
     "RunConfig",
     "RunInterrupted",
     "check_inputs_outside",
+    "check_out",
+    "check_run_name",
     "partial_recording",
     "prepare_run_dir",
     "release_run_dir",
@@ -254,10 +269,13 @@ def prepare_run_dir(
     Raises
     ------
     ValueError
+        ``name`` is no plain folder name (:func:`check_run_name`), ``out`` or
         ``<out>/<name>`` is a file; with ``overwrite``: an input lies in the folder, or
         another run holds it.
     """
     out = Path(out)
+    check_run_name(name)
+    check_out(out)
     folder = out / name
     if folder.exists() and not folder.is_dir():
         raise ValueError(f"run folder {folder} exists and is a file")
@@ -362,6 +380,30 @@ class RunConfig:
         robots = self.robots
         if not isinstance(robots, int) or isinstance(robots, bool) or not 2 <= robots <= 8:
             raise ValueError(f"robots must be an integer from 2 to 8, got {robots!r}")
+        if self.name is not None:
+            check_run_name(self.name)
+
+
+def check_run_name(name: str) -> None:
+    """Refuse (``ValueError``, one line naming ``--name``) a run name that is not one plain
+    folder name: empty, ``.`` or ``..``, or with a path separator or a NUL in it."""
+    separators = [s for s in ("/", os.sep, os.altsep) if s]
+    if name in ("", ".", "..") or "\0" in name or any(s in name for s in separators):
+        raise ValueError(
+            f"--name {name!r}: a run name is one plain folder name inside --out "
+            "(not empty, '.' or '..', no '/' or NUL)"
+        )
+
+
+def check_out(out: Path) -> None:
+    """Refuse (``ValueError``, one line naming ``--out``) an ``out`` that exists and is no
+    folder, or whose nearest existing parent is no folder."""
+    for folder in (out, *out.parents):
+        if folder.exists():
+            if not folder.is_dir():
+                which = "" if folder == out else f" {folder}"
+                raise ValueError(f"--out {out}:{which} exists and is not a folder")
+            return
 
 
 def resolve_world(
@@ -497,8 +539,11 @@ def _run_experiment(config: RunConfig) -> dict[str, Any]:
     comm = CommConfig() if config.comm else CommConfig(comm_range=1e-9)
     env_config = EnvConfig(max_cycles=config.max_steps, comm=comm)
     resolution = _grid_resolution(env_config)
+    check_out(Path(config.out))
     world = resolve_world(config.scenario, config.map_path, config.seed, resolution=resolution)
-    name = config.name or f"{world.name.replace(':', '_')}-seed{config.seed}"
+    stem = world.name if config.map_path is None else Path(config.map_path).stem
+    name = config.name or f"{stem}-seed{config.seed}"
+    check_run_name(name)
     inputs = input_files(config.map_path)
     if config.overwrite:  # bad input is refused before any work
         check_inputs_outside(Path(config.out) / name, inputs)
@@ -556,12 +601,18 @@ def _run_experiment(config: RunConfig) -> dict[str, Any]:
         keep_on = keep_on and not (config.oracle or config.single)
         steps = 0
         interrupted: str | None = None
+        failed: OSError | None = None  # the recording's failure (the module docstring)
         started = time.perf_counter()
         try:
             if config.record:
-                recorder = Recorder(
-                    recording_part, n_robots=len(agents), map_every=config.map_every
-                )
+                try:
+                    recorder = Recorder(
+                        recording_part, n_robots=len(agents), map_every=config.map_every
+                    )
+                except (RuntimeError, OSError) as error:  # e.g. a full disk: run on without
+                    recording_part.unlink(missing_ok=True)
+                    failed = RecordingError.of(recording_part, error)
+            if recorder is not None:
                 recorder.log_ground_truth(world, ground_truth_map(world, 0.05))
                 recorder.log_event(
                     f"run {name}: world {world.name}, {len(agents)} robots, seed {config.seed}"
@@ -768,16 +819,29 @@ def _run_experiment(config: RunConfig) -> dict[str, Any]:
             recorder.log_event(
                 f"run {ending} after {steps} steps, coverage {coverage['merged']:.1%}"
             )
-            recorder.close()
-            recording_part.replace(run_dir / "recording.rrd")
-            outputs["recording"] = str(run_dir / "recording.rrd")
+            try:
+                recorder.close()
+                recording_part.replace(run_dir / "recording.rrd")
+            except OSError as error:  # RecordingError from close(), or the rename's
+                failed = error if isinstance(error, RecordingError) else None
+                failed = failed or RecordingError.of(run_dir / "recording.rrd", error)
+            else:
+                outputs["recording"] = str(run_dir / "recording.rrd")
+            finally:
+                recording_part.unlink(missing_ok=True)
         interrupted = interrupted or received()
         report.update(complete=interrupted is None, interrupted=interrupted)
+        report["errors"] = [] if failed is None else [str(failed)]
         write_text_atomic(run_dir / "report.json", json.dumps(report, indent=2) + "\n")
+        if failed is not None:
+            raise failed
         return report
     except BaseException:  # a crash: close the recording, leave no partial file
-        if recorder is not None:
-            recorder.close()
+        try:
+            if recorder is not None:
+                with suppress(Exception):  # the crash is what the caller sees
+                    recorder.close()
+        finally:
             recording_part.unlink(missing_ok=True)
         raise
     finally:

@@ -331,7 +331,11 @@ def check_out_folder(out: Path) -> None:
     out = Path(out)
     if out.exists():
         if not out.is_dir() or any(out.iterdir()):
-            raise ValueError(f"--out {out}: already exists and is not an empty folder")
+            raise ValueError(
+                f"--out {out}: already exists and is not an empty folder (it may hold an "
+                f"earlier sweep's reports: --from {out} rebuilds their table; choose a new "
+                "--out to run again)"
+            )
         where = out
     else:
         where = out.parent
