@@ -90,6 +90,7 @@ from mrslam_env.merge.pipeline import (
 from mrslam_env.validation import check_fields, require
 
 __all__ = [
+    "Acceptance",
     "Decision",
     "MergeAttempt",
     "TeamConfig",
@@ -328,6 +329,28 @@ class MergeAttempt:
     map1: GridMap
     robots: tuple[int, int] = (0, 1)
     """The robots whose maps (their groups' maps, in the groups' root frames) were merged."""
+
+
+@dataclass(frozen=True, slots=True)
+class Acceptance:
+    """A hypothesis the team accepted (for the recording's story of a merge)."""
+
+    step: int
+    index: int
+    """Its number among the hypotheses to verify (``#index``), from 0."""
+    count: int
+    """How many hypotheses were to verify beside it."""
+    proposed_by: str
+    """Where it came from: a merge source (:attr:`ScoredHypothesis.proposed_by`:
+    ``"virtual robot"``, ``"correlation"``, ``"hough"``...) or ``"sighting"``."""
+    attempt: int | None
+    """The merge attempt that proposed it (None: from sightings)."""
+    how: str
+    """How it was verified (the acceptance's words)."""
+    verified: FloatArray
+    """The hypothesis as verified, before refinement (side 0's from side 1's frame)."""
+    refined: FloatArray
+    """The transform kept after refinement."""
 
 
 @dataclass(slots=True)
@@ -578,6 +601,13 @@ class TeamCoordinator:
         of its own mapping (a robot exploring on a stale copy of its own map drives to
         frontiers it has already explored)."""
         self.rendezvous: _Rendezvous | None = None
+        self.hypothesis_sources: list[str] = []
+        """Per entry of :attr:`hypotheses`, where it came from (:class:`Acceptance`'s
+        ``proposed_by``); for the recording only."""
+        self.hypotheses_attempt: int | None = None
+        """The merge attempt that gave :attr:`hypotheses` (None: from sightings)."""
+        self.acceptances: list[Acceptance] = []
+        """Every hypothesis accepted, in order; for the recording only."""
         self._decisions: list[Decision] = []
         self._merge_attempts: list[MergeAttempt] = []
         self._merges_tried = 0
@@ -755,6 +785,14 @@ class TeamCoordinator:
         window = 2 * self.config.sighting_count
         recent = any(t and self.step - t[-1][0] < window for t in self._sightings.values())
         return recent or any(seeking is not None for seeking in self._seeking)
+
+    def source_of(self, rendezvous: _Rendezvous) -> str:
+        """Where the hypothesis of ``rendezvous`` came from (:class:`Acceptance`'s
+        ``proposed_by``)."""
+        if rendezvous.formed_at is not None:
+            return "sighting"
+        sources = self.hypothesis_sources
+        return sources[rendezvous.index] if rendezvous.index < len(sources) else "virtual robot"
 
     def pop_decisions(self) -> list[Decision]:
         decisions, self._decisions = self._decisions, []
@@ -981,6 +1019,7 @@ class TeamCoordinator:
     def _rest(self) -> None:
         """No merge under way: coordinated if robot 0 has a teammate in its frame."""
         self.hypotheses = []
+        self.hypothesis_sources = []
         self.rendezvous = None
         coordinated = len(self.members) > 1
         self.state = TeamState.COORDINATED_EXPLORATION if coordinated else TeamState.NO_INTERACTION
@@ -1051,6 +1090,12 @@ class TeamCoordinator:
         )
         fresh = [h for h in fresh if not self._radio_rejects(h, "from the merge")]
         self.hypotheses = fresh[: self.config.max_rendezvous]
+        sources = {
+            id(h.map1_from_map2): getattr(h, "proposed_by", "virtual robot")
+            for h in result.hypotheses
+        }
+        self.hypothesis_sources = [sources.get(id(h), "virtual robot") for h in self.hypotheses]
+        self.hypotheses_attempt = self._merges_tried
         # Rivals: one meeting cannot tell which of two open answers is right, more map
         # may; the merge's own answer (if it gave one) is still driven to at once.
         rivals = len(fresh) > 1
@@ -1148,6 +1193,7 @@ class TeamCoordinator:
             self._decide(f"{seen}; rejected by {why}")
             return False
         self.hypotheses = [transform]
+        self.hypothesis_sources, self.hypotheses_attempt = ["sighting"], None
         self.rendezvous = _Rendezvous(
             hypothesis=transform,
             index=0,
@@ -1184,6 +1230,7 @@ class TeamCoordinator:
         the waiting one is from sightings or is the same answer (within the rendezvous
         tolerances where robot 1 is): then it waits on, its wait counted from its start."""
         waiting, hypotheses = self.rendezvous, self.hypotheses
+        sources, attempt = self.hypothesis_sources, self.hypotheses_attempt
         undecided, tested = self._undecided, self.hypotheses_tested
         assert waiting is not None
         if not self._link or not self._generate(self._side_maps(maps)):
@@ -1203,6 +1250,7 @@ class TeamCoordinator:
         if keep:
             # The new merge's hypotheses are dropped: its rivals and its count with them.
             self.rendezvous, self.hypotheses = waiting, hypotheses
+            self.hypothesis_sources, self.hypotheses_attempt = sources, attempt
             self._undecided, self.hypotheses_tested = undecided, tested
             self.state = TeamState.HYPOTHESIS_VERIFICATION
             self._decide(f"the hypothesis {kind} waits on for a later meeting")
@@ -1717,6 +1765,18 @@ class TeamCoordinator:
         self._decide(
             f"refined by random walk: psi {psi:.3f}, acceptance index {agreement.index:.3f}; "
             "coordinated exploration on the merged map"
+        )
+        self.acceptances.append(
+            Acceptance(
+                step=self.step,
+                index=rendezvous.index,
+                count=len(self.hypotheses),
+                proposed_by=self.source_of(rendezvous),
+                attempt=None if rendezvous.formed_at is not None else self.hypotheses_attempt,
+                how=how,
+                verified=rendezvous.hypothesis.copy(),
+                refined=np.array(transform, dtype=np.float64),
+            )
         )
         self.rendezvous = None
         self._release_pair()

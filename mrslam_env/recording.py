@@ -20,10 +20,16 @@ All spatial data is in metres. Robots are numbered from 0 (``robot_0``, ``robot_
 ``robot_i/scan``                    the same scan placed at the SLAM pose (``Points2D``)
 ``robot_i/frontiers``, ``/plan``    its exploration targets and plan (:meth:`log_points`)
 ``merge/...``                       merge stages, in map 1's frame (:meth:`log_merge`,
-                                    :meth:`log_merge_attempt`)
+                                    :meth:`log_merge_attempt`), then the hypothesis
+                                    under verification (``merge/verifying``,
+                                    :meth:`log_merge_verification`) and the accepted
+                                    merge (``merge/verified``, ``merge/refine/best``,
+                                    ``merge/result``, :meth:`log_merge_accepted`)
+``merge/caption``                   the Merge view's state in words (a label)
 ``rendezvous/...``                  the rendezvous, in robot 0's map frame
                                     (:meth:`log_rendezvous`)
-``team/merged_map``                 the fused map, in robot 0's map frame
+``team/merged_map``                 every robot's current map fused, in robot 0's map
+                                    frame (logged whenever a map or transform changes)
 ``team/robot_i/{pose,path}``        the robots in that frame (:meth:`set_team_transform`)
 ``team/state``                      ``TextLog``: the team's state (:meth:`log_text`)
 ``rendezvous/status``               ``TextLog``: the rendezvous' verdicts
@@ -104,6 +110,7 @@ __all__ = [
     "occupancy_image",
     "robot_entity",
     "scan_hits_world",
+    "source_words",
 ]
 
 #: Root entities that hold y-up spatial data besides ``robot_i``.
@@ -173,6 +180,23 @@ def robot_entity(robot: int) -> str:
 def robot_colour(robot: int) -> tuple[int, int, int]:
     """A fixed RGB colour per robot, shared by all its entities."""
     return _ROBOT_COLOURS[robot % len(_ROBOT_COLOURS)]
+
+
+_SOURCE_WORDS: Final = {
+    "virtual robot": "the virtual robot",
+    "correlation": "the wall correlation",
+    "hough": "the Hough spectra",
+    "symmetry": "the symmetry check",
+    "twin": "the 180° twin",
+    "neighbour": "a neighbour of the best",
+    "sighting": "sightings",
+}
+
+
+def source_words(proposed_by: str) -> str:
+    """Where a hypothesis came from, in words: ``"virtual robot"`` -> ``"the virtual
+    robot"``, ``"hough"`` -> ``"the Hough spectra"``, ``"sighting"`` -> ``"sightings"``..."""
+    return _SOURCE_WORDS.get(proposed_by, proposed_by)
 
 
 def occupancy_classes(grid: GridMap, style: MapStyle = "map") -> NDArray[np.uint8]:
@@ -1002,7 +1026,13 @@ class Recorder:
         self.log_event(result.reason)
 
     def log_merge_attempt(
-        self, attempt: int, result: MergeResult, m1: GridMap, m2: GridMap, label: str = ""
+        self,
+        attempt: int,
+        result: MergeResult,
+        m1: GridMap,
+        m2: GridMap,
+        label: str = "",
+        then: str = "",
     ) -> None:
         """Log one live merge attempt at the current step, replacing the previous one.
 
@@ -1026,23 +1056,115 @@ class Recorder:
             the Merge view's frame, the team frame) and robot 1's.
         label : str
             What triggered the attempt, e.g. ``"maps exchanged at step 120"``.
+        then : str
+            What the team does next, appended to the event (e.g. that a hypothesis of
+            this refused attempt still goes to verification).
+
+        The Merge view's caption (``merge/caption``, a label at the top of the view) says
+        the attempt's verdict in words: ``"merge attempt 4 refused: no confident merge:
+        ..."``.
         """
         self._check_open()
-        previous = self._merge_entities
-        self._collect = set()
-        try:
+        verdict = "merged" if result.merged else "refused"
+        name = f"merge attempt {attempt}"
+        caption = f"{name} {verdict}: {result.reason}"
+
+        def draw() -> None:
             self._log_merge_stages(result, m1, m2)
-            current = {e for e in self._collect if e.startswith("merge/")}
-        finally:
-            self._collect = None
-        # Clear what the previous attempt drew and this one did not. Entities drawn again
-        # are not cleared: the viewer would apply a Clear at the same step after the new
-        # Transform3D of a map (drawing it unscaled), though not after its image.
-        for entity in sorted(previous - current):
-            self._log(entity, rr.Clear(recursive=False))
-        self._merge_entities = current
-        name = f"merge attempt {attempt}" + (f" ({label})" if label else "")
-        self.log_event(f"{name}: {result.reason}", level="INFO" if result.merged else "WARN")
+            self._log_caption(caption, _MERGE_GREEN if result.merged else _MERGE_RED)
+
+        self._replace_merge(draw)
+        event = f"{name}" + (f" ({label})" if label else "") + f" {verdict}: {result.reason}"
+        event += f"; {then}" if then else ""
+        self.log_event(event, level="INFO" if result.merged else "WARN")
+
+    def log_merge_verification(
+        self,
+        hypothesis: ArrayLike,
+        m1: GridMap,
+        m2: GridMap,
+        text: str,
+        caption: str | None = None,
+    ) -> None:
+        """Show the hypothesis under verification in the Merge view, replacing what was
+        there (e.g. a refused attempt's stages; its judged hypotheses, ``merge/hypotheses``,
+        stay): map 1, map 2 placed by ``hypothesis`` (``map1_from_map2``), the arrow
+        ``merge/verifying`` where it puts map 2's origin (unlabelled: the hypothesis'
+        own label says which it is) and the caption (``caption``, default ``text``;
+        e.g. ``"hypothesis #0 (1 of 3), from the virtual robot: verifying at the
+        rendezvous"``); ``text`` is logged as an event."""
+        self._check_open()
+        placement = _as_pose(hypothesis, "hypothesis")
+
+        def draw() -> None:
+            self._log_merge_maps(m1, m2, placement)
+            self._log_arrow("merge/verifying", placement, (230, 160, 0), None)
+            self._log_caption(caption or text, (200, 120, 0))
+
+        self._replace_merge(draw, keep={"merge/hypotheses"})
+        self.log_event(text)
+
+    def log_merge_accepted(
+        self,
+        verified: ArrayLike,
+        refined: ArrayLike,
+        m1: GridMap,
+        m2: GridMap,
+        fused: GridMap | None,
+        text: str,
+        *,
+        caption: str | None = None,
+        event: bool = True,
+    ) -> None:
+        """Show an accepted merge in the Merge view, replacing what was there: map 1, map
+        2 placed by the ``refined`` transform (``map1_from_map2``), the fused map
+        (``merge/result``), the verified estimate (``merge/verified``, a thin arrow) and
+        the refined transform (``merge/refine/best``), and the caption (``caption``,
+        default ``text``; e.g. ``"accepted at step 135, refined: 0.02 m / 0.06° from the
+        verified estimate"``); ``text`` is logged as an event unless ``event`` is False."""
+        self._check_open()
+        before = _as_pose(verified, "verified")
+        after = _as_pose(refined, "refined")
+
+        def draw() -> None:
+            if fused is not None:
+                self._log_grid(
+                    "merge/result", fused, None, _DRAW_ORDER_GRID - 1, static=False, opacity=1.0
+                )
+            self._log_merge_maps(m1, m2, after)
+            self._log_arrow("merge/verified", before, (90, 90, 90), None, 0.03)
+            self._log_arrow("merge/refine/best", after, _MERGE_GREEN, "accepted, refined", 0.07)
+            self._log_caption(caption or text, _MERGE_GREEN)
+
+        self._replace_merge(draw)
+        if event:
+            self.log_event(text)
+
+    def log_merge_caption(self, text: str, level: str = "INFO") -> None:
+        """Replace the Merge view's caption (e.g. ``"hypothesis 1 of 2 rejected: ..."``)
+        and clear the hypothesis under verification (``merge/verifying``); no event (the
+        team's decision says it)."""
+        self._check_open()
+        colour = _MERGE_RED if _level(level) in ("WARN", "ERROR", "CRITICAL") else _MERGE_GREEN
+        if "merge/verifying" in self._merge_entities:
+            self._log("merge/verifying", rr.Clear(recursive=False))
+            self._merge_entities.discard("merge/verifying")
+        self._log_caption(text, colour)
+
+    def merge_difference(
+        self, verified: ArrayLike, refined: ArrayLike, m2: GridMap
+    ) -> tuple[float, float]:
+        """How far ``refined`` moves map 2's known centre from where ``verified`` puts it
+        (m) and how much it turns it (degrees, absolute)."""
+        before = _as_pose(verified, "verified")
+        after = _as_pose(refined, "refined")
+        known = np.argwhere(~m2.unknown)
+        centre = m2.cell_to_world(known.mean(axis=0)[None, :]) if len(known) else np.zeros((1, 2))
+        moved = float(
+            np.hypot(*(transform_points(after, centre) - transform_points(before, centre))[0])
+        )
+        turned = abs(math.degrees(float(wrap_angle(after[2] - before[2]))))
+        return moved, turned
 
     # -- lifetime ------------------------------------------------------------------------
 
@@ -1088,14 +1210,24 @@ class Recorder:
 
     # -- internals -----------------------------------------------------------------------
 
-    def _log_merge_stages(self, result: MergeResult, m1: GridMap, m2: GridMap) -> None:
-        transform = result.transform
-        if transform is not None:
-            placement = np.asarray(transform, dtype=np.float64)
-        else:
-            # Side by side: map 2's frame shifted right of map 1's extent.
-            x1 = m1.origin[0] + m1.cells.shape[1] * m1.resolution
-            placement = np.array([x1 + 2.0 - m2.origin[0], m1.origin[1] - m2.origin[1], 0.0])
+    def _replace_merge(self, draw: Any, keep: Collection[str] = ()) -> None:
+        """Run ``draw`` (it logs ``merge/...`` entities) and clear, at this step, what the
+        Merge view showed before and ``draw`` did not draw again (but ``keep``). Entities
+        drawn again are not cleared: the viewer would apply a Clear at the same step after
+        the new Transform3D of a map (drawing it unscaled), though not after its image."""
+        kept = self._merge_entities & set(keep)
+        previous = self._merge_entities - kept
+        self._collect = set()
+        try:
+            draw()
+            current = {e for e in self._collect if e.startswith("merge/")}
+        finally:
+            self._collect = None
+        for entity in sorted(previous - current):
+            self._log(entity, rr.Clear(recursive=False))
+        self._merge_entities = current | kept
+
+    def _log_merge_maps(self, m1: GridMap, m2: GridMap, placement: NDArray[np.float64]) -> None:
         self._log_grid(
             "merge/map1", m1, None, _DRAW_ORDER_GRID, static=False, opacity=1.0, style="see_through"
         )
@@ -1108,6 +1240,53 @@ class Recorder:
             opacity=1.0,
             style="overlay",
         )
+
+    def _log_arrow(
+        self,
+        entity: str,
+        pose: NDArray[np.float64],
+        colour: tuple[int, int, int],
+        label: str | None,
+        radius: float = 0.05,
+    ) -> None:
+        self._log(
+            entity,
+            rr.Arrows2D(
+                origins=pose[None, :2],
+                vectors=[[0.8 * math.cos(pose[2]), 0.8 * math.sin(pose[2])]],
+                colors=colour,
+                radii=radius,
+                labels=label,
+                show_labels=True,
+                draw_order=_DRAW_ORDER_POSE + 1,
+            ),
+        )
+
+    def _log_caption(self, text: str, colour: tuple[int, int, int]) -> None:
+        """``merge/caption``: the Merge view's state in words, a label centred at the top
+        of what the view shows (its y-up bounds)."""
+        bounds = self._bounds.get("merge", (0.0, 0.0, 0.0, 0.0))
+        self._log(
+            "merge/caption",
+            rr.Points2D(
+                [[0.5 * (bounds[0] + bounds[2]), bounds[3]]],
+                radii=0.12,
+                colors=colour,
+                labels=text,
+                show_labels=True,
+                draw_order=_DRAW_ORDER_POSE + 5,
+            ),
+        )
+
+    def _log_merge_stages(self, result: MergeResult, m1: GridMap, m2: GridMap) -> None:
+        transform = result.transform
+        if transform is not None:
+            placement = np.asarray(transform, dtype=np.float64)
+        else:
+            # Side by side: map 2's frame shifted right of map 1's extent.
+            x1 = m1.origin[0] + m1.cells.shape[1] * m1.resolution
+            placement = np.array([x1 + 2.0 - m2.origin[0], m1.origin[1] - m2.origin[1], 0.0])
+        self._log_merge_maps(m1, m2, placement)
         trace = result.trace
         if trace is not None:
             self._log_merge_trace(result, placement)
@@ -1126,7 +1305,9 @@ class Recorder:
                     vectors=0.5 * headings,
                     # Labels for the best three and the confident ones: a dozen overlap.
                     labels=[
-                        f"#{i} ai {h.acceptance_index:.2f} psi {h.psi:.0f}"
+                        f"#{i} {source_words(h.proposed_by)}: agreement "
+                        f"{h.acceptance_index:.2f}, overlap {h.overlap:.0%}"
+                        + ("" if h.confident else ", not confident")
                         if i < 3 or h.confident
                         else ""
                         for i, h in enumerate(result.hypotheses)

@@ -51,6 +51,7 @@ interrupts.install_for_console_script()
 import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
+import os  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
@@ -391,7 +392,17 @@ def _cmd_run(args: argparse.Namespace) -> int:
         interrupts.end_console_script()
 
 
+def kernels_compiled() -> bool:
+    """Whether numba's cache holds compiled kernels of the package (an index file under
+    ``NUMBA_CACHE_DIR``, or by default in the package's ``__pycache__`` folders)."""
+    cache = os.environ.get("NUMBA_CACHE_DIR")
+    root = Path(cache) if cache else Path(__file__).resolve().parents[1] / "mrslam_env"
+    return next(root.rglob("*.nbi"), None) is not None
+
+
 def _run(args: argparse.Namespace) -> int:
+    if not kernels_compiled():
+        print("mrslam: compiling the numba kernels once (about 40 s more)...", file=sys.stderr)
     from scenarios.experiment import RunConfig, run_experiment
 
     config = RunConfig(

@@ -97,7 +97,7 @@ from numpy.typing import NDArray
 
 from agents.policy import build_policy, load_policy_factory, policy_label
 from agents.rendezvous import judge_sighting, sighting_pose
-from agents.team import TeamConfig, TeamCoordinator
+from agents.team import MergeAttempt, TeamConfig, TeamCoordinator
 from mrslam_env.atomic import atomic_path, write_text_atomic
 from mrslam_env.config import CommConfig, EnvConfig
 from mrslam_env.env import MultiRobotSlamEnv
@@ -111,11 +111,11 @@ from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import GridMap
 from mrslam_env.mapio import load_map, map_images, save_map
 from mrslam_env.merge.fuse import fuse_all
-from mrslam_env.recording import Recorder, RecordingError
+from mrslam_env.recording import Recorder, RecordingError, source_words
 from mrslam_env.registry import build_world
 from mrslam_env.sim.mapworld import check_world_extent, world_from_map
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
-from scenarios.figure import summary_figure
+from scenarios.figure import no_merge_reason, summary_figure
 from scenarios.interrupts import RunInterrupted, noting_signals, raise_if_received, received
 
 __all__ = [
@@ -587,6 +587,7 @@ def _run_experiment(config: RunConfig) -> dict[str, Any]:
 
         logged_scans = [-1] * len(agents)
         drawn = _DrawnRendezvous()
+        merge_view = _MergeView()
         shown_transforms: list[FloatArray | None] = [None] * len(agents)
         collisions = dict.fromkeys(agents, 0)
         state = team.state
@@ -637,24 +638,26 @@ def _run_experiment(config: RunConfig) -> dict[str, Any]:
                     decisions = team.pop_decisions()
                     if recorder is not None:
                         recorder.set_time(steps, steps * env_config.dt)
+                        attempts = team.pop_merge_attempts()
+                        pending = list(attempts)
                         for decision in decisions:
-                            recorder.log_event(decision.text)
                             if "rendezvous" in decision.text or "hypothesis #" in decision.text:
                                 recorder.log_text("rendezvous/status", decision.text)
-                        for attempt in team.pop_merge_attempts():
-                            recorder.log_merge_attempt(
-                                attempt.number,
-                                attempt.result,
-                                attempt.map0,
-                                attempt.map1,
-                                label=f"robot_{attempt.robots[0]}'s and "
-                                f"robot_{attempt.robots[1]}'s maps at step {attempt.step}",
-                            )
+                            if pending and decision.text.endswith("to verify by rendezvous"):
+                                # The attempt's event says it, with the attempt's verdict.
+                                _log_attempts(recorder, team, pending, merge_view)
+                                pending = []
+                            else:
+                                recorder.log_event(decision.text)
+                        _log_attempts(recorder, team, pending, merge_view)
+                        moved = []
                         for k in range(1, len(agents)):
                             frame = team.frames[k] if team.roots[k] == 0 else None
                             if frame is not None and frame is not shown_transforms[k]:
                                 recorder.set_team_transform(k, frame)
                                 shown_transforms[k] = frame
+                                moved.append(k)
+                        _record_merge(recorder, team, maps, merge_view, decisions, moved)
                         if team.state is not state:
                             recorder.log_text("team/state", str(team.state))
                         _record_step(
@@ -761,6 +764,7 @@ def _run_experiment(config: RunConfig) -> dict[str, Any]:
             },
         }
         if config.figure:
+            n = len(agents)
             with atomic_path(run_dir / "figure.png") as figure:
                 summary_figure(
                     figure,
@@ -770,6 +774,10 @@ def _run_experiment(config: RunConfig) -> dict[str, Any]:
                     preliminary,
                     merged,
                     more_maps=own_maps[2:],
+                    world_from_maps=world_from_maps,
+                    verified=[team.verified[k] if k in joined else None for k in range(1, n)],
+                    transforms=[team.frames[k] if k in joined else None for k in range(1, n)],
+                    no_merge=no_merge_reason(merge_report, str(team.state), events),
                 )
             outputs["figure"] = str(run_dir / "figure.png")
         report: dict[str, Any] = {
@@ -855,6 +863,153 @@ class _DrawnRendezvous:
 
     active: bool = False
     sightings: list[tuple[FloatArray, bool]] = field(default_factory=list)
+    merged_key: tuple[tuple[int, int], ...] = ()
+    """What the Team view's merged map was fused from: per robot, its map's scan count
+    and its transform's identity."""
+
+
+@dataclass(slots=True)
+class _MergeView:
+    """What the Merge view shows: the maps of the last attempt, the rendezvous (its
+    identity and whether it was in place) whose hypothesis is drawn, the acceptances
+    drawn."""
+
+    maps: tuple[GridMap, GridMap] | None = None
+    shown: tuple[int, bool] | None = None
+    index: int = 0
+    accepted: int = 0
+
+
+def _words(proposed_by: str, attempt: int | None) -> str:
+    """``"from the virtual robot (merge attempt 4)"``, ``"from sightings"``."""
+    return f"from {source_words(proposed_by)}" + (
+        f" (merge attempt {attempt})" if attempt is not None else ""
+    )
+
+
+def _log_attempts(
+    recorder: Recorder, team: TeamCoordinator, attempts: list[MergeAttempt], view: _MergeView
+) -> None:
+    """Log merge attempts, each with what the team does with its hypotheses."""
+    for attempt in attempts:
+        recorder.log_merge_attempt(
+            attempt.number,
+            attempt.result,
+            attempt.map0,
+            attempt.map1,
+            label=f"robot_{attempt.robots[0]}'s and robot_{attempt.robots[1]}'s maps at "
+            f"step {attempt.step}",
+            then=_attempt_outcome(team, attempt, attempt is attempts[-1]),
+        )
+        view.maps = (attempt.map0, attempt.map1)
+
+
+def _attempt_outcome(team: TeamCoordinator, attempt: MergeAttempt, last: bool) -> str:
+    """What the team does with a merge attempt's hypotheses, for its event."""
+    if not last or team.hypotheses_attempt != attempt.number or not team.hypotheses:
+        return "no hypothesis goes to verification"
+    judged = {id(h.map1_from_map2): h for h in attempt.result.hypotheses}
+    parts = []
+    for index, (hypothesis, source) in enumerate(
+        zip(team.hypotheses, team.hypothesis_sources, strict=True)
+    ):
+        scored = judged.get(id(hypothesis))
+        score = "" if scored is None else f", agreement {scored.acceptance_index:.2f}"
+        parts.append(f"#{index} (from {source_words(source)}{score})")
+    verb = "goes" if len(parts) == 1 else "go"
+    return f"hypothesis {'; '.join(parts)} {verb} to verification by rendezvous"
+
+
+def _record_merge(
+    recorder: Recorder,
+    team: TeamCoordinator,
+    maps: MapCache,
+    view: _MergeView,
+    decisions: Sequence[Any],
+    moved: Sequence[int],
+) -> None:
+    """Keep the Merge view on the team's state: the hypothesis under verification (from
+    where, verified how), then the accepted and refined transform with the fused map;
+    a hypothesis rejected or set aside in words (docs/reading-a-recording.md)."""
+    if len(team.acceptances) > view.accepted or moved:
+        new = team.acceptances[view.accepted :]
+        view.accepted = len(team.acceptances)
+        for k in moved or (1,):
+            frame, verified = team.frames[k], team.verified[k]
+            if frame is None or verified is None or team.roots[k] != 0:
+                continue
+            m0, mk = maps(0), maps(k)
+            dist, turn = recorder.merge_difference(verified, frame, mk)
+            if new:
+                done = new[-1]
+                text = (
+                    f"robot_{k}'s map accepted at step {done.step}: hypothesis "
+                    f"#{done.index} ({done.index + 1} of {done.count}), "
+                    f"{_words(done.proposed_by, done.attempt)}, "
+                    f"verified: {done.how}; refined: {dist:.2f} m / {turn:.2f}° from the "
+                    "verified estimate"
+                )
+            else:
+                text = (
+                    f"robot_{k}'s transform re-refined at step {recorder.step}: {dist:.2f} m / "
+                    f"{turn:.2f}° from the verified estimate"
+                )
+            short = f"robot_{k}: " + (
+                f"accepted at step {new[-1].step}, refined" if new else "re-refined"
+            )
+            recorder.log_merge_accepted(
+                verified,
+                frame,
+                m0,
+                mk,
+                _fuse_all([m0, mk], {1: frame}),
+                text,
+                caption=f"{short}: {dist:.2f} m / {turn:.2f}° from the verified estimate",
+                event=bool(new),
+            )
+        view.shown = None
+        return
+    rendezvous = team.rendezvous
+    if rendezvous is not None:
+        key = (id(rendezvous), rendezvous.in_place)
+        if key == view.shown:
+            return
+        view.shown, view.index = key, rendezvous.index
+        a, b = team.pair
+        if team.roots[a] == a and team.roots[b] == b:
+            m1, m2 = maps(a), maps(b)
+        elif view.maps is not None:
+            m1, m2 = view.maps
+        else:
+            return
+        if rendezvous.formed_at is not None:
+            how = "by sightings once both robots have moved on"
+        elif rendezvous.in_place and rendezvous.waits:
+            how = "where the robots explore, waiting for a chance meeting"
+        elif rendezvous.in_place:
+            how = "where the robots stand, confirming while they move"
+        else:
+            x, y = rendezvous.meeting_point
+            how = f"at the rendezvous ({x:.1f}, {y:.1f})"
+        attempt = None if rendezvous.formed_at is not None else team.hypotheses_attempt
+        text = (
+            f"hypothesis #{rendezvous.index} ({rendezvous.index + 1} of {len(team.hypotheses)}), "
+            f"{_words(team.source_of(rendezvous), attempt)}: verifying {how}"
+        )
+        recorder.log_merge_verification(
+            rendezvous.hypothesis,
+            m1,
+            m2,
+            text,
+            caption=f"hypothesis #{rendezvous.index} ({rendezvous.index + 1} of "
+            f"{len(team.hypotheses)}), from {source_words(team.source_of(rendezvous))}: "
+            f"verifying {how.split(' (')[0]}",
+        )
+    elif view.shown is not None:
+        view.shown = None
+        ended = [d.text for d in decisions if f"#{view.index}" in d.text]
+        why = ended[-1] if ended else f"hypothesis #{view.index}: verification ended"
+        recorder.log_merge_caption(why, level="WARN")
 
 
 def _record_step(
@@ -944,8 +1099,19 @@ def _record_step(
     elif drawn.active:
         recorder.clear_rendezvous()
         drawn.active, drawn.sightings = False, []
-    if due and coordinated and team.merged_map is not None:
-        recorder.log_grid("team/merged_map", team.merged_map)
+    # The Team view's merged map: every robot in robot 0's frame, each with its current
+    # map (robot 0's own view holds the others' maps as last received, stale while a
+    # link is down), logged whenever one of them changed: a map (scan counts, updated on
+    # the steps maps are due) or a transform (at once).
+    joined = [k for k in range(1, len(agents)) if team.roots[k] == 0 and team.frames[k] is not None]
+    if coordinated and joined:
+        key = tuple((logged_scans[k], id(team.frames[k])) for k in (0, *joined))
+        if key != drawn.merged_key:
+            own = [maps(k) if k == 0 or k in joined else maps(0) for k in range(len(agents))]
+            recorder.log_grid(
+                "team/merged_map", _fuse_all(own, {k: team.frames[k] for k in joined})
+            )
+            drawn.merged_key = key
 
 
 def _fuse_all(own_maps: list[GridMap], transforms: dict[int, FloatArray | None]) -> GridMap:

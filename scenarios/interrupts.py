@@ -192,10 +192,15 @@ def noting_signals(*, redeliver: bool = False) -> Iterator[None]:
 
 
 def install_for_console_script() -> None:
-    """Install the handlers when this process is the ``mrslam`` console script (never in a
-    program that merely imports the CLI)."""
+    """Install the handlers when this process is the ``mrslam`` console script (``argv[0]``
+    is named ``mrslam``). Never in a program that merely imports the CLI, nor in a sweep's
+    spawned worker, which imports the console script as its parent's main module with the
+    parent's ``sys.argv`` (its own command line, ``sys.orig_argv``, ends in
+    multiprocessing's ``--multiprocessing-fork``)."""
     global _console_script
-    if sys.argv[:1] and os.path.basename(sys.argv[0]) == "mrslam" and install():
+    script = os.path.basename(sys.argv[0]) if sys.argv[:1] else ""
+    worker = "--multiprocessing-fork" in getattr(sys, "orig_argv", ())
+    if script == "mrslam" and not worker and install():
         _console_script = True
 
 
@@ -226,9 +231,22 @@ def end_by(signum: int) -> NoReturn:
     name = signal.Signals(signum).name
     with suppress(OSError):  # stderr closed: the status still says it
         os.write(2, f"mrslam: interrupted by {name}\n".encode())
+    _end_children()
     signal.signal(signum, signal.SIG_DFL)
     signal.raise_signal(signum)
     os._exit(128 + signum)
+
+
+def _end_children() -> None:
+    """SIGTERM to this process's multiprocessing children (a sweep's pool workers), which
+    would otherwise wait forever on a parent that is gone, holding the caller's stdout
+    and stderr open. Only when multiprocessing was ever imported (never imported here)."""
+    multiprocessing = sys.modules.get("multiprocessing")
+    if multiprocessing is None:
+        return
+    for child in multiprocessing.active_children():
+        with suppress(Exception):  # gone already, or not ours to end
+            child.terminate()
 
 
 def end_on_signals() -> None:

@@ -4,6 +4,7 @@ code; ``main()`` called from Python installs no such handler."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
@@ -93,3 +94,62 @@ def test_main_from_python_leaves_the_sigint_handler_as_it_found_it(
     assert status == cli.EXIT_INTERRUPTED
     assert capsys.readouterr().err == "mrslam: interrupted by SIGINT\n"
     assert interrupts.received() is None
+
+
+def _children(pid: int) -> list[int]:
+    """The live child processes of ``pid`` (from /proc)."""
+    found = []
+    for status in Path("/proc").glob("[0-9]*/status"):
+        try:
+            fields = dict(
+                line.split(":\t", 1) for line in status.read_text().splitlines() if ":\t" in line
+            )
+        except OSError:
+            continue
+        if fields.get("PPid", "").strip() == str(pid) and not fields["State"].startswith("Z"):
+            found.append(int(status.parent.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    return "\nState:\tZ" not in state
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs /proc")
+def test_an_interrupted_sweep_leaves_no_worker_behind(tmp_path: Path) -> None:
+    # bench explore runs its runs in spawned pool workers: ended at once by the signal,
+    # the parent must take them with it (they would wait forever on a parent that is gone,
+    # holding the caller's stdout and stderr open).
+    command = [_console_script(), "bench", "explore", "--seeds", "1", "--max-steps", "3000"]
+    command += ["--scenarios", "office", "--modes", "team", "--out", str(tmp_path / "bx")]
+    with open(tmp_path / "err.txt", "w") as err:
+        proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=err, cwd=tmp_path)
+    workers: list[int] = []
+    try:
+        deadline = time.monotonic() + DEADLINE_S
+        while not workers:
+            assert proc.poll() is None, (tmp_path / "err.txt").read_text()
+            assert time.monotonic() < deadline, "bench explore never started a worker"
+            workers = [p for p in _children(proc.pid) if _has_loaded(p, "numpy")]
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=DEADLINE_S) == -signal.SIGINT
+        deadline = time.monotonic() + DEADLINE_S
+        while any(_alive(p) for p in workers):
+            assert time.monotonic() < deadline, "the sweep's workers outlived it"
+            time.sleep(0.05)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        for pid in workers:
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+    # Then multiprocessing's resource tracker may warn that it cleans up the pool's
+    # semaphores: its own lines, after ours, never a traceback.
+    err = (tmp_path / "err.txt").read_text()
+    assert err.startswith("mrslam: interrupted by SIGINT\n") and "Traceback" not in err, err

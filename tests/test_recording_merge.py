@@ -250,7 +250,7 @@ def test_hypotheses_and_random_walk(merged: Logged) -> None:
     expected = np.array([h.map1_from_map2[:2] for h in result.hypotheses])
     np.testing.assert_allclose(origins, expected, atol=1e-5)
     assert len(labels) == len(result.hypotheses)
-    assert labels[0].startswith("#0 ai ")
+    assert labels[0].startswith("#0 the virtual robot: agreement ")
     # The best candidate's random walk: every proposal, after the virtual robot's stages.
     walk = result.trace.refinements[0].trace
     assert walk is not None
@@ -326,3 +326,75 @@ def test_cli_merge_writes_the_recording(tmp_path: Path, capsys: pytest.CaptureFi
     np.testing.assert_allclose(translation, [*fused.origin, 0.0], atol=1e-6)
     assert grid_image(recording, "/merge/result").shape == fused.shape
     assert "map1_from_map2" in out
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory: pytest.TempPathFactory) -> tuple[Recording, Path]:
+    """The default run (office, seed 0) to step 300: merge attempt 4 is refused at step
+    126, its hypothesis from the virtual robot verified and accepted at step 135."""
+    from scenarios.experiment import RunConfig, run_experiment
+
+    out = tmp_path_factory.mktemp("live")
+    report = run_experiment(RunConfig(out=out, max_steps=300, figure=False, progress=False))
+    run_dir = Path(report["outputs"]["recording"]).parent
+    return Recording(run_dir / "recording.rrd"), run_dir
+
+
+def test_live_merge_view_and_events_tell_one_story(live: tuple[Recording, Path]) -> None:
+    """Issue 39: the Merge view stayed on the refused attempt 4, and its WARN contradicted
+    the acceptance without naming where the verified hypothesis came from."""
+    recording, _ = live
+    captions = {
+        step: labels[0]
+        for batch in recording.batches("/merge/caption", static=False)
+        for step, labels in zip(
+            batch.column("step").to_pylist(),
+            batch.column("Points2D:labels").to_pylist(),
+            strict=True,
+        )
+        if labels
+    }
+    assert captions[126].startswith("hypothesis #0 (1 of 1), from the virtual robot")
+    assert "verifying at the rendezvous" in captions[126]
+    assert captions[135].startswith("robot_1: accepted at step 135, refined: ")
+    assert "refined: " in captions[135] and "from the verified estimate" in captions[135]
+    assert max(captions) == 135  # nothing replaces the accepted merge before step 300
+    # After acceptance the Merge view holds the accepted transform and the fused map.
+    assert recording.at_step("/merge/result", "SegmentationImage:format", 135)
+    assert recording.at_step("/merge/refine/best", "Arrows2D:origins", 135)
+    assert recording.at_step("/merge/skeleton/map1", "Clear:is_recursive", 126) == [[False]]
+    texts = [t[0] for t in recording.column("/events", "TextLog:text")]
+    levels = [t[0] for t in recording.column("/events", "TextLog:level")]
+    (refusal,) = [
+        (t, lv) for t, lv in zip(texts, levels, strict=True) if "merge attempt 4 (robot" in t
+    ]
+    assert refusal[1] == "WARN" and " refused: no confident merge" in refusal[0]
+    assert "hypothesis #0 (from the virtual robot, agreement" in refusal[0]
+    assert "goes to verification by rendezvous" in refusal[0]
+    assert not any("hypotheses to verify by rendezvous" in t for t in texts)
+    (accepted,) = [t for t in texts if "map accepted at step 135" in t]
+    assert "from the virtual robot (merge attempt 4)" in accepted
+
+
+def test_live_team_map_is_current(live: tuple[Recording, Path]) -> None:
+    """Issue 39: the Team view showed robot 0's stale view of the merged map; it is the
+    fusion of every robot's current map, logged whenever it changed."""
+    recording, run_dir = live
+    steps = sorted(set(recording.column("/team/merged_map", "step")))
+    assert steps[0] == 135  # at the acceptance, not at the next step maps are due
+    # At the last step, the map logged in the loop is the run's merged map (merged.yaml).
+    merged = load_map(run_dir / "merged.yaml")
+    images = [
+        np.array(buffer[0], dtype=np.uint8).reshape(fmt[0]["height"], fmt[0]["width"])
+        for buffer, fmt in zip(
+            recording.at_step("/team/merged_map", "SegmentationImage:buffer", 300),
+            recording.at_step("/team/merged_map", "SegmentationImage:format", 300),
+            strict=True,
+        )
+    ]
+    assert len(images) == 2  # the loop's and the run's end
+    expected = np.full(merged.cells.shape, 0, dtype=np.uint8)
+    expected[merged.cells == FREE] = 1
+    expected[merged.cells == OCCUPIED] = 2
+    for image in images:
+        np.testing.assert_array_equal(image, expected)

@@ -26,7 +26,7 @@ from test_recording import Recording
 from mrslam_env.geometry import compose, inverse, transform_points
 from mrslam_env.gridmap import FREE, OCCUPIED, UNKNOWN, GridMap
 from mrslam_env.merge.pipeline import MergeResult, merge_maps
-from mrslam_env.recording import MAP_STYLES, Recorder, default_blueprint
+from mrslam_env.recording import MAP_STYLES, Recorder, default_blueprint, grid_corner_pose
 from mrslam_env.registry import build_world
 from mrslam_env.sim.lidar import beam_angles, cast_scan
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
@@ -517,20 +517,24 @@ def test_merge_attempts_replace_each_other(run: Run) -> None:
     # The walk's psi is on merge_iteration only: it would pile up at one step otherwise.
     for batch in recording.batches("/metrics/merge/refine_psi", static=False):
         assert "step" not in batch.schema.names
-    # Hypotheses carry their scores.
+    # Hypotheses carry their scores, in words: where each came from and its agreement.
     labels = recording.column("/merge/hypotheses", "Arrows2D:labels")[-1]
-    assert labels[0].startswith("#0 ai ") and " psi " in labels[0]
+    assert labels[0].startswith("#0 the virtual robot: agreement ") and "overlap" in labels[0]
+    assert not any(" ai " in label or " psi " in label for label in labels)
     texts = [t[0] for t in recording.column("/events", "TextLog:text")]
     levels = [t[0] for t in recording.column("/events", "TextLog:level")]
     attempts = [(t, lv) for t, lv in zip(texts, levels, strict=True) if "merge attempt" in t]
     assert attempts == [
-        (f"#{MERGE_STEP - 2:<5} merge attempt 1 (maps exchanged): {result.reason}", "INFO"),
+        (f"#{MERGE_STEP - 2:<5} merge attempt 1 (maps exchanged) merged: {result.reason}", "INFO"),
         (
-            f"#{MERGE_STEP - 1:<5} merge attempt 2 (maps grew): "
+            f"#{MERGE_STEP - 1:<5} merge attempt 2 (maps grew) refused: "
             "no confident merge: (test) no hypothesis passed",
             "WARN",
         ),
-        (f"#{MERGE_STEP:<5} merge attempt 3 (maps grew again): {result.reason}", "INFO"),
+        (
+            f"#{MERGE_STEP:<5} merge attempt 3 (maps grew again) merged: {result.reason}",
+            "INFO",
+        ),
     ]
 
 
@@ -554,3 +558,60 @@ def test_team_view_places_every_robot_in_robot_0_frame(run: Run) -> None:
     assert clears == [[True]]
     colours = recording.at_step("/rendezvous/sightings", "Points2D:colors", 2)[0]
     assert len(colours) == 2 and colours[0] != colours[1]
+
+
+def test_merge_view_follows_the_team_to_the_accepted_merge(run: Run, tmp_path: Any) -> None:
+    """A refused attempt, its hypothesis under verification, then the acceptance: the
+    Merge view shows each in turn, labelled in words, and the last one holds the accepted
+    transform and the fused map (issue 39: it stayed on the refused attempt)."""
+    result, (m1, m2) = run.result, run.maps
+    assert result.transform is not None and result.fused is not None
+    verified = result.transform + np.array([0.05, -0.03, 0.01])
+    path = tmp_path / "story.rrd"
+    with Recorder(path, n_robots=2) as recorder:
+        recorder.set_time(2, 0.2)
+        recorder.log_merge_attempt(
+            4, refused(result), m1, m2, "maps at step 2", then="hypothesis #0 goes to verification"
+        )
+        recorder.set_time(3, 0.3)
+        recorder.log_merge_verification(
+            verified, m1, m2, "hypothesis #0 (1 of 1), from the virtual robot: verifying"
+        )
+        recorder.set_time(5, 0.5)
+        recorder.log_merge_accepted(
+            verified, result.transform, m1, m2, result.fused, "accepted at step 5, refined"
+        )
+    recording = Recording(path)
+
+    def caption(step: int) -> str:
+        (labels,) = recording.at_step("/merge/caption", "Points2D:labels", step)
+        return str(labels[0])
+
+    assert caption(2).startswith("merge attempt 4 refused: no confident merge")
+    assert caption(3) == "hypothesis #0 (1 of 1), from the virtual robot: verifying"
+    assert caption(5) == "accepted at step 5, refined"
+    # Verification: map 2 placed by the hypothesis, its arrow there; the attempt's stages
+    # cleared but its judged hypotheses kept.
+    (origin,) = recording.at_step("/merge/verifying", "Arrows2D:origins", 3)
+    np.testing.assert_allclose(origin[0], verified[:2], atol=1e-5)
+    assert recording.at_step("/merge/skeleton/map1", "Clear:is_recursive", 3) == [[False]]
+    assert not recording.at_step("/merge/hypotheses", "Clear:is_recursive", 3)
+    (translations,) = recording.at_step("/merge/map2", "Transform3D:translation", 3)
+    corner = grid_corner_pose(m2, verified)
+    np.testing.assert_allclose(translations[0][:2], corner[:2], atol=1e-5)
+    # Acceptance: the refined transform, the verified estimate, the fused map; the
+    # hypothesis under verification cleared.
+    (best,) = recording.at_step("/merge/refine/best", "Arrows2D:origins", 5)
+    np.testing.assert_allclose(best[0], result.transform[:2], atol=1e-5)
+    (before,) = recording.at_step("/merge/verified", "Arrows2D:origins", 5)
+    np.testing.assert_allclose(before[0], verified[:2], atol=1e-5)
+    (fused,) = recording.at_step("/merge/result", "SegmentationImage:format", 5)
+    assert (fused[0]["height"], fused[0]["width"]) == result.fused.cells.shape
+    assert recording.at_step("/merge/verifying", "Clear:is_recursive", 5) == [[False]]
+    texts = [t[0] for t in recording.column("/events", "TextLog:text")]
+    assert texts == [
+        "#2     merge attempt 4 (maps at step 2) refused: no confident merge: (test) no "
+        "hypothesis passed; hypothesis #0 goes to verification",
+        "#3     hypothesis #0 (1 of 1), from the virtual robot: verifying",
+        "#5     accepted at step 5, refined",
+    ]
