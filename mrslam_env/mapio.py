@@ -179,6 +179,19 @@ _FILE_KINDS = (
 )
 
 
+def _check_input_file(path: Path, what: str, limit: int, why: str) -> int:
+    """The size in bytes of an input, refused before reading when it is not a regular file
+    (a FIFO would block, a device never end) or is larger than ``limit`` bytes (``why``
+    says why that limit)."""
+    problem = _regular_file_problem(path)
+    if problem is not None:
+        raise MapFileError(path, problem)
+    size = path.stat().st_size
+    if size > limit:
+        raise MapFileError(path, f"{what} of {size:,} bytes; the limit is {limit:,} ({why})")
+    return size
+
+
 def _regular_file_problem(path: Path) -> str | None:
     """Why ``path`` (links resolved) is not a regular file, or None if it is one.
 
@@ -392,16 +405,12 @@ def read_image(path: PathLike) -> NDArray[np.uint8]:
     """
     path = Path(path)
     try:
-        problem = _regular_file_problem(path)
-        if problem is not None:
-            raise MapFileError(path, problem)
-        size = path.stat().st_size
-        if size > MAX_IMAGE_FILE_BYTES:
-            raise MapFileError(
-                path,
-                f"image file of {size:,} bytes; the limit is {MAX_IMAGE_FILE_BYTES:,} (4 bytes "
-                f"a pixel of {MAX_GRID_CELLS:,} pixels, plus 1 MiB)",
-            )
+        size = _check_input_file(
+            path,
+            "image file",
+            MAX_IMAGE_FILE_BYTES,
+            f"4 bytes a pixel of {MAX_GRID_CELLS:,} pixels, plus 1 MiB",
+        )
         with path.open("rb") as handle:
             head = handle.read(_PNM_HEADER_BYTES)
         if len(head) == 0:
@@ -484,16 +493,7 @@ def _read_yaml(yaml_path: Path) -> dict[str, Any]:
     try:
         if yaml_path.is_dir():
             raise IsADirectoryError
-        problem = _regular_file_problem(yaml_path)
-        if problem is not None:
-            raise MapFileError(yaml_path, problem)
-        size = yaml_path.stat().st_size
-        if size > MAX_YAML_BYTES:
-            raise MapFileError(
-                yaml_path,
-                f"map YAML of {size:,} bytes; the limit is {MAX_YAML_BYTES:,} (a map YAML is "
-                "a few lines)",
-            )
+        _check_input_file(yaml_path, "map YAML", MAX_YAML_BYTES, "a map YAML is a few lines")
         text = _read_at_most(yaml_path, MAX_YAML_BYTES, "map YAML").decode("utf-8")
     except FileNotFoundError:
         raise MapFileError(yaml_path, "map YAML file not found") from None

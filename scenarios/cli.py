@@ -73,15 +73,25 @@ def _exit_signalled(name: str) -> int:
     return {"SIGHUP": EXIT_HUNG_UP, "SIGINT": EXIT_INTERRUPTED}.get(name, EXIT_TERMINATED)
 
 
-def _count(text: str) -> int:
-    """argparse type of a count (steps, repeats, seeds, pairs, jobs): an integer >= 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {value}")
-    return value
+def _integer_from(minimum: int, what: str) -> Any:
+    """An argparse type: an integer >= ``minimum``, refused as "must be ``what``"."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be {what}, got {value}")
+        return value
+
+    return parse
+
+
+_count = _integer_from(1, "an integer >= 1")
+"""argparse type of a count (steps, repeats, seeds, pairs, jobs)."""
+_seed = _integer_from(0, "a non-negative integer")
+"""argparse type of a seed."""
 
 
 MIN_RESOLUTION = 0.001
@@ -96,17 +106,6 @@ def _version() -> str:
         return version("mrslam")
     except PackageNotFoundError:  # run from a source tree that is not installed
         return "unknown (not installed)"
-
-
-def _seed(text: str) -> int:
-    """argparse type of a seed: a non-negative integer."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {value}")
-    return value
 
 
 class _Parser(argparse.ArgumentParser):

@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
+from mrslam_env.mapio import save_map
+from mrslam_env.registry import build_world
+from mrslam_env.sim.world import ground_truth_map
 from scenarios import interrupts
 
 
@@ -19,3 +23,13 @@ def no_signal_note_outlives_a_test() -> Iterator[None]:
     interrupts.restore()
     interrupts.take()
     assert left is None, f"a {left} note outlived the test"
+
+
+@pytest.fixture()
+def maps(tmp_path: Path) -> Path:
+    """Two small map files, a.yaml/a.pgm and b.yaml/b.pgm (the maze at 0.1 m), in
+    tmp_path."""
+    grid = ground_truth_map(build_world("maze"), 0.1, margin=0.5)
+    save_map(tmp_path / "a.yaml", grid)
+    save_map(tmp_path / "b.yaml", grid)
+    return tmp_path

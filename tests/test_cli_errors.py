@@ -12,9 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from mrslam_env.mapio import load_map, save_map
-from mrslam_env.registry import build_world
-from mrslam_env.sim.world import ground_truth_map
+from mrslam_env.mapio import load_map
 from scenarios import cli
 from scenarios.cli import main
 
@@ -36,15 +34,6 @@ def digest(folder: Path) -> dict[str, str]:
         for p in sorted(folder.iterdir())
         if p.is_file()
     }
-
-
-@pytest.fixture()
-def maps(tmp_path: Path) -> Path:
-    """Two small map files, a.yaml/a.pgm and b.yaml/b.pgm, in tmp_path."""
-    grid = ground_truth_map(build_world("maze"), 0.1, margin=0.5)
-    save_map(tmp_path / "a.yaml", grid)
-    save_map(tmp_path / "b.yaml", grid)
-    return tmp_path
 
 
 def assert_one_line(err: str, status: int, expected: int = 2) -> None:

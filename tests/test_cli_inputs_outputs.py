@@ -15,9 +15,6 @@ from pathlib import Path
 
 import pytest
 
-from mrslam_env.mapio import save_map
-from mrslam_env.registry import build_world
-from mrslam_env.sim.world import ground_truth_map
 from scenarios import cli
 from scenarios.cli import main
 
@@ -43,14 +40,6 @@ def digest(folder: Path) -> dict[str, str]:
         for p in sorted(folder.rglob("*"))
         if p.is_file()
     }
-
-
-@pytest.fixture()
-def maps(tmp_path: Path) -> Path:
-    grid = ground_truth_map(build_world("maze"), 0.1, margin=0.5)
-    save_map(tmp_path / "a.yaml", grid)
-    save_map(tmp_path / "b.yaml", grid)
-    return tmp_path
 
 
 def no_work(*args: object, **kwargs: object) -> object:
