@@ -22,9 +22,9 @@ import pytest
 
 from mrslam_env.gridmap import FREE, OCCUPIED, GridMap
 from mrslam_env.mapio import save_map
-from scenarios import experiment, interrupts
+from scenarios import experiment, interrupts, run_folder
 from scenarios.cli import main
-from scenarios.experiment import prepare_run_dir, release_run_dir
+from scenarios.run_folder import prepare_run_dir, release_run_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 DEADLINE_S = 240.0
@@ -120,7 +120,7 @@ def test_runs_started_together_keep_a_folder_and_a_report_each(tmp_path: Path) -
 
 
 def test_the_partial_recording_is_named_for_its_process(tmp_path: Path) -> None:
-    assert str(os.getpid()) in experiment.partial_recording(tmp_path).name
+    assert str(os.getpid()) in run_folder.partial_recording(tmp_path).name
 
 
 # --- 3: --overwrite never deletes an input ---------------------------------------------------
@@ -163,15 +163,15 @@ def test_overwrite_keeps_an_input_it_would_not_delete(tmp_path: Path) -> None:
     # under an output's name (which --overwrite deletes) is refused.
     folder = tmp_path / "x"
     world = small_map(folder, "world")
-    inputs = experiment.input_files(world)
+    inputs = run_folder.input_files(world)
     (folder / "report.json").write_text("{}")  # the earlier run's
     assert prepare_run_dir(tmp_path, "x", overwrite=True, inputs=inputs) == folder
     release_run_dir(folder)
     assert sorted(p.name for p in folder.iterdir()) == ["world.pgm", "world.yaml"]
     earlier = small_map(folder, "robot_0")  # an earlier run's map, read as the input
     with pytest.raises(ValueError, match=r"would delete the input map file .*robot_0"):
-        prepare_run_dir(tmp_path, "x", overwrite=True, inputs=experiment.input_files(earlier))
-    assert earlier.exists() and not (folder / experiment.RUN_MARKER).exists()
+        prepare_run_dir(tmp_path, "x", overwrite=True, inputs=run_folder.input_files(earlier))
+    assert earlier.exists() and not (folder / run_folder.RUN_MARKER).exists()
 
 
 def test_a_failed_overwrite_lets_go_of_the_folder(
@@ -183,7 +183,7 @@ def test_a_failed_overwrite_lets_go_of_the_folder(
     argv = ["run", "--out", str(tmp_path), "--name", "x", "--overwrite", "--max-steps", "1"]
     assert main([*argv, "--no-record"]) == 2
     assert capsys.readouterr().err.count("\n") == 1
-    assert not (folder / experiment.RUN_MARKER).exists()
+    assert not (folder / run_folder.RUN_MARKER).exists()
     (folder / "report.json").rmdir()
     assert prepare_run_dir(tmp_path, "x", overwrite=True) == folder  # not "held"
     release_run_dir(folder)
@@ -197,10 +197,10 @@ def test_a_marker_that_cannot_be_written_is_not_left(
 
     (tmp_path / "x").mkdir()
     with monkeypatch.context() as patch:
-        patch.setattr(experiment.os, "fdopen", full)
+        patch.setattr(run_folder.os, "fdopen", full)
         with pytest.raises(OSError, match="No space"):
             prepare_run_dir(tmp_path, "x", overwrite=True)
-    assert not (tmp_path / "x" / experiment.RUN_MARKER).exists()
+    assert not (tmp_path / "x" / run_folder.RUN_MARKER).exists()
 
 
 def _dead_pid() -> int:
@@ -214,11 +214,11 @@ def test_a_stale_marker_of_a_dead_run_is_replaced(tmp_path: Path) -> None:
 
     folder = tmp_path / "x"
     folder.mkdir()
-    marker = folder / experiment.RUN_MARKER
+    marker = folder / run_folder.RUN_MARKER
     marker.write_text(f"pid {_dead_pid()} on {socket.gethostname()}\n")  # killed by SIGKILL
     assert prepare_run_dir(tmp_path, "x", overwrite=True) == folder
     assert marker.read_text() == f"pid {os.getpid()} on {socket.gethostname()}\n"
-    assert [p.name for p in folder.iterdir()] == [experiment.RUN_MARKER]  # nothing aside
+    assert [p.name for p in folder.iterdir()] == [run_folder.RUN_MARKER]  # nothing aside
     release_run_dir(folder)
     # A live process on this host, or any on another host, still holds the folder.
     host = socket.gethostname()
@@ -234,11 +234,11 @@ def test_runs_racing_for_a_stale_folder_only_one_holds_it(tmp_path: Path) -> Non
 
     folder = tmp_path / "a"
     folder.mkdir()
-    (folder / experiment.RUN_MARKER).write_text(f"pid {_dead_pid()} on {socket.gethostname()}\n")
+    (folder / run_folder.RUN_MARKER).write_text(f"pid {_dead_pid()} on {socket.gethostname()}\n")
     claimed = _race(6, lambda: prepare_run_dir(tmp_path, "a", overwrite=True))
     held = [c for c in claimed if isinstance(c, Path)]
     assert held == [folder], claimed
-    assert [p.name for p in folder.iterdir()] == [experiment.RUN_MARKER]
+    assert [p.name for p in folder.iterdir()] == [run_folder.RUN_MARKER]
 
 
 # --- 4: signals --------------------------------------------------------------------------

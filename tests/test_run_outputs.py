@@ -13,13 +13,8 @@ from test_recording import Recording
 
 from agents.team import TeamCoordinator
 from scenarios.cli import main
-from scenarios.experiment import (
-    OUTPUT_FILES,
-    RunConfig,
-    prepare_run_dir,
-    release_run_dir,
-    run_experiment,
-)
+from scenarios.experiment import RunConfig, run_experiment
+from scenarios.run_folder import OUTPUT_FILES, prepare_run_dir, release_run_dir
 
 
 def test_a_new_folder_is_used_as_named_an_existing_one_never(tmp_path: Path) -> None:
