@@ -79,6 +79,7 @@ from __future__ import annotations
 import errno
 import math
 import shutil
+import textwrap
 from collections.abc import Collection, Mapping, Sequence
 from contextlib import suppress
 from pathlib import Path
@@ -159,6 +160,9 @@ _ROBOT_COLOURS: Final = (
 )
 _OUTLINE: Final = (20, 20, 20)
 _MERGE_GREEN: Final = (0, 170, 0)
+_CAPTION_WIDTH: Final = 64
+"""Characters a line of the Merge view's caption (a half-width view of the default
+blueprint at 1600 px shows about 70)."""
 _MERGE_RED: Final = (200, 0, 0)
 
 _LEVELS: Final = {"WARNING": "WARN", "FATAL": "CRITICAL"}
@@ -1264,8 +1268,11 @@ class Recorder:
 
     def _log_caption(self, text: str, colour: tuple[int, int, int]) -> None:
         """``merge/caption``: the Merge view's state in words, a label centred at the top
-        of what the view shows (its y-up bounds)."""
+        of what the view shows (its y-up bounds), in lines of at most
+        :data:`_CAPTION_WIDTH` characters so that a long caption is not cut at the view's
+        edges."""
         bounds = self._bounds.get("merge", (0.0, 0.0, 0.0, 0.0))
+        text = textwrap.fill(text, _CAPTION_WIDTH, break_long_words=False)
         self._log(
             "merge/caption",
             rr.Points2D(

@@ -4,14 +4,10 @@ current code (scripts/make_docs_images.py), or is listed there as kept, with why
 from __future__ import annotations
 
 import importlib.util
-import re
 from types import ModuleType
 
 import pytest
 from test_docs import DOCUMENTS, ROOT, relative_links
-
-MADE_ELSEWHERE = re.compile(r"^docs/recording-.*\.png$")
-"""The recording's images, made by the recording's own command."""
 
 
 def script() -> ModuleType:
@@ -39,7 +35,7 @@ def test_the_docs_show_images() -> None:
 
 def test_every_linked_image_exists_and_has_a_maker() -> None:
     make = script()
-    linked = {name for name in linked_images() if not MADE_ELSEWHERE.match(name)}
+    linked = linked_images()
     assert all((ROOT / name).exists() for name in linked)
     unmade = linked - set(make.IMAGES) - set(make.KEPT)
     assert not unmade, f"no maker in scripts/make_docs_images.py for {sorted(unmade)}"

@@ -344,7 +344,7 @@ def test_live_merge_view_and_events_tell_one_story(live: tuple[Recording, Path])
     """Issue 39: the Merge view stayed on the refused attempt 4, and its WARN contradicted
     the acceptance without naming where the verified hypothesis came from."""
     recording, _ = live
-    captions = {
+    wrapped = {
         step: labels[0]
         for batch in recording.batches("/merge/caption", static=False)
         for step, labels in zip(
@@ -354,6 +354,10 @@ def test_live_merge_view_and_events_tell_one_story(live: tuple[Recording, Path])
         )
         if labels
     }
+    # Long captions are wrapped into lines that fit a half-width view.
+    assert all(len(line) <= 64 for text in wrapped.values() for line in text.split("\n"))
+    assert any("\n" in text for text in wrapped.values())
+    captions = {step: " ".join(text.split()) for step, text in wrapped.items()}
     assert captions[126].startswith("hypothesis #0 (1 of 1), from the virtual robot")
     assert "verifying at the rendezvous" in captions[126]
     assert captions[135].startswith("robot_1: accepted at step 135, refined: ")

@@ -585,7 +585,7 @@ def test_merge_view_follows_the_team_to_the_accepted_merge(run: Run, tmp_path: A
 
     def caption(step: int) -> str:
         (labels,) = recording.at_step("/merge/caption", "Points2D:labels", step)
-        return str(labels[0])
+        return " ".join(str(labels[0]).split())
 
     assert caption(2).startswith("merge attempt 4 refused: no confident merge")
     assert caption(3) == "hypothesis #0 (1 of 1), from the virtual robot: verifying"
