@@ -1,10 +1,11 @@
 """The scenario catalogue: every world is a closed building a robot can drive through.
 
 Checked on the ground-truth raster at 5 cm (ground_truth_map) for every hand-made world,
-procedural seeds 0..9 and procedural_large seeds 0..3: start poses free, clear and far
-apart; the building sealed from the outside; the free space passable for a 0.2 m robot (no
-sealed rooms); the procedural generator deterministic and varied; the two wings of
-``twin_wings`` true copies; the large plans wider than the radio's range.
+procedural seeds 0..9, procedural_large seeds 0..3 and procedural_huge seeds 0..1: start
+poses free, clear and far apart; the building sealed from the outside; the free space
+passable for a 0.2 m robot (no sealed rooms); the procedural generator deterministic and
+varied; the two wings of ``twin_wings`` true copies; the large plans wider than the radio's
+range; the huge ones with long loops.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from mrslam_env.config import CommConfig
-from mrslam_env.gridmap import GridMap
+from mrslam_env.gridmap import FREE, GridMap
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
 from scenarios.worlds import buildings
 from scenarios.worlds.catalog import SCENARIOS, Scenario
@@ -48,7 +49,8 @@ HAND_MADE = [
 CASES = [(name, 0) for name in HAND_MADE] + [("procedural", seed) for seed in PROCEDURAL_SEEDS]
 LARGE_SEEDS = range(4)
 LARGE_CASES = [("procedural_large", seed) for seed in LARGE_SEEDS]
-ALL_CASES = CASES + LARGE_CASES
+HUGE_SEEDS = range(2)
+ALL_CASES = CASES + LARGE_CASES + [("procedural_huge", seed) for seed in HUGE_SEEDS]
 CASE_IDS = [f"{name}-{seed}" for name, seed in CASES]
 ALL_IDS = [f"{name}-{seed}" for name, seed in ALL_CASES]
 
@@ -86,14 +88,15 @@ def wall_clearance(grid: GridMap) -> NDArray[np.float64]:
 
 
 def test_catalogue_holds_the_builtin_scenarios() -> None:
-    built = {"office", "warehouse", "maze", "twin_wings", "procedural", "procedural_large"}
+    built = {"office", "warehouse", "maze", "twin_wings"}
+    built |= {"procedural", "procedural_large", "procedural_huge"}
     assert set(SCENARIOS) == built | set(REAL_BUILDINGS)
     for name, scenario in SCENARIOS.items():
         assert isinstance(scenario, Scenario)
         assert scenario.name == name
         assert scenario.description and "\n" not in scenario.description
     parametric = [name for name, s in SCENARIOS.items() if s.parametric]
-    assert parametric == ["procedural", "procedural_large"]
+    assert parametric == ["procedural", "procedural_large", "procedural_huge"]
 
 
 def test_catalogue_is_the_registered_entry_point() -> None:
@@ -257,6 +260,26 @@ def test_procedural_large_is_larger_than_the_radio_range(seed: int) -> None:
     # The starts are out of radio range of each other: the link is down at step 0.
     first, second = world.starts
     assert np.hypot(*(first[:2] - second[:2])) > 2.0 * CommConfig().comm_range
+
+
+@pytest.mark.parametrize("seed", HUGE_SEEDS)
+def test_procedural_huge_is_a_big_building_with_long_loops(seed: int) -> None:
+    """Loop closure needs loops: a wall block with floor all around it, whose outline (and
+    so any path around it) is at least 100 m long."""
+    world = world_of("procedural_huge", seed)
+    assert world.name == f"procedural_huge-{seed}"
+    xmin, ymin, xmax, ymax = world.bounds
+    sides = sorted((xmax - xmin, ymax - ymin))
+    assert 45.0 <= sides[0] <= 60.5 and 60.0 <= sides[1] <= 80.5, world.bounds
+    grid = ground_truth_map(world, RESOLUTION, margin=1.0)
+    blocks, _ = ndimage.label(grid.cells != FREE, structure=EIGHT_NEIGHBOURS)
+    outside = set(np.unique(np.concatenate([blocks[0], blocks[-1], blocks[:, 0], blocks[:, -1]])))
+    outlines = [
+        2 * RESOLUTION * ((rows.stop - rows.start) + (cols.stop - cols.start))
+        for label, (rows, cols) in enumerate(ndimage.find_objects(blocks), start=1)
+        if label not in outside
+    ]
+    assert max(outlines) >= 100.0
 
 
 def test_procedural_rooms_tile_the_floor() -> None:

@@ -13,6 +13,7 @@ name                  size (m)       character
 ``twin_wings``        32 x 14        two identical wings: a trap for map merging
 ``procedural``        18-28 sides    seeded office-like floor plans (``build(seed)``)
 ``procedural_large``  36-44 x 24-30  the same plans larger than the radio's range (12 m)
+``procedural_huge``   60-80 x 45-60  the same plans with loops of tens to hundreds of metres
 ====================  =============  ===================================================
 
 Real buildings (:mod:`scenarios.worlds.real`, SLAM maps of real places):
@@ -28,7 +29,11 @@ from types import MappingProxyType
 
 from mrslam_env.sim.world import WorldSpec
 from scenarios.worlds import buildings
-from scenarios.worlds.procedural import build_procedural, build_procedural_large
+from scenarios.worlds.procedural import (
+    build_procedural,
+    build_procedural_huge,
+    build_procedural_large,
+)
 from scenarios.worlds.real import REAL_BUILDINGS, build_real
 
 __all__ = ["DEFAULT_SCENARIO", "SCENARIOS", "Scenario"]
@@ -112,6 +117,13 @@ SCENARIOS: Mapping[str, Scenario] = MappingProxyType(
                 description="seeded office-like floor plans larger than the comm range "
                 "(36-44 x 24-30 m, starts 25-40 m apart; build(seed))",
                 build=build_procedural_large,
+                parametric=True,
+            ),
+            Scenario(
+                name="procedural_huge",
+                description="seeded office-like floor plans with long loops, for loop "
+                "closure (60-80 x 45-60 m; build(seed))",
+                build=build_procedural_huge,
                 parametric=True,
             ),
             *(

@@ -38,6 +38,7 @@ from mrslam_env.sim.world import (
 from mrslam_env.validation import check_fields, require
 
 __all__ = [
+    "HUGE_CONFIG",
     "LARGE_CONFIG",
     "FloorPlan",
     "Opening",
@@ -46,6 +47,7 @@ __all__ = [
     "RoomKind",
     "SharedWall",
     "build_procedural",
+    "build_procedural_huge",
     "build_procedural_large",
     "carve_floor_plan",
     "choose_openings",
@@ -691,4 +693,27 @@ def build_procedural_large(seed: int = 0) -> WorldSpec:
         world,
         name=f"procedural_large-{seed}",
         description=world.description.replace("procedural office", "large procedural office"),
+    )
+
+
+HUGE_CONFIG = ProceduralConfig(long_side=(60.0, 80.0), short_side=(45.0, 60.0), extra_doors=(4, 8))
+"""The generator's parameters for buildings where SLAM must close loops: the office-like
+plans at 60-80 m by 45-60 m, like the large real floor plans of public SLAM data sets,
+with 4 to 8 doors beyond the spanning tree, so that the corridors and rooms form loops of
+tens to hundreds of metres."""
+
+
+def build_procedural_huge(seed: int = 0) -> WorldSpec:
+    """A huge office-like world drawn from ``seed`` (:data:`HUGE_CONFIG`).
+
+    Returns
+    -------
+    WorldSpec
+        Named ``procedural_huge-<seed>``.
+    """
+    world = build_procedural(seed, HUGE_CONFIG)
+    return replace(
+        world,
+        name=f"procedural_huge-{seed}",
+        description=world.description.replace("procedural office", "huge procedural office"),
     )
