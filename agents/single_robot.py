@@ -74,10 +74,10 @@ class SingleRobotEnv(gymnasium.Env[Float32Array, Float32Array]):
 
     Parameters
     ----------
-    scenario, n_robots, config, max_cycles
+    scenario, n_robots, config, max_cycles, privileged
         As :class:`~mrslam_env.env.MultiRobotSlamEnv` (``config.flat_observation`` is
         ignored: the teammates need the ``Dict`` observation, the learner gets the flat
-        one).
+        one; ground truth is in the infos only with ``privileged=True``).
     teammates : {"frontier", "wander", "idle"}
         The scripted policy of ``robot_1 ... robot_{n-1}``.
     render_mode : None or "rgb_array"
@@ -106,6 +106,7 @@ class SingleRobotEnv(gymnasium.Env[Float32Array, Float32Array]):
         config: EnvConfig | None = None,
         max_cycles: int | None = None,
         render_mode: str | None = None,
+        privileged: bool | None = None,
     ) -> None:
         if teammates not in TEAMMATES:
             raise ValueError(f"teammates must be one of {TEAMMATES}, got {teammates!r}")
@@ -121,6 +122,7 @@ class SingleRobotEnv(gymnasium.Env[Float32Array, Float32Array]):
             render_mode=render_mode,
             config=replace(config, flat_observation=False),
             max_cycles=max_cycles,
+            privileged=privileged,
         )
         self.teammates = teammates
         self.render_mode = render_mode

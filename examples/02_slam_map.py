@@ -1,8 +1,9 @@
 """Onboard SLAM: let robot_0 wander, then save its map as a ROS map (YAML + PGM).
 
 Shows ``env.unwrapped.robot_map(agent)`` (the robot's own map, in its start frame),
-``mrslam_env.mapio.save_map`` and how to judge the SLAM pose against the privileged
-``infos[agent]["true_pose"]`` (evaluation only, never for a policy).
+``mrslam_env.mapio.save_map`` and how to judge the SLAM pose against the ground truth
+``infos[agent]["true_pose"]``, there with ``privileged=True`` only (evaluation only, never
+for a policy).
 
 Run: python examples/02_slam_map.py [--steps 400] [--out runs/robot_0.yaml] [--overwrite]
 """
@@ -24,7 +25,7 @@ args = parser.parse_args()
 if not args.overwrite and (args.out.exists() or args.out.with_suffix(".pgm").exists()):
     parser.error(f"{args.out} exists; --overwrite replaces it")  # never a silent overwrite
 
-env = parallel_env(scenario="office", seed=0)
+env = parallel_env(scenario="office", seed=0, privileged=True)  # ground truth in the infos
 observations, infos = env.reset()
 world_from_map = infos["robot_0"]["true_pose"]  # the map frame is the start pose
 wander = WanderPolicy(n_beams=len(observations["robot_0"]["scan"]), rng=np.random.default_rng(0))

@@ -218,6 +218,10 @@ class EnvConfig:
     flat_length_scale: float = 50.0
     """Length (m) that divides the ``odom`` and ``pose`` positions in the flat
     observation (clipped to [-1, 1])."""
+    privileged: bool = False
+    """If true, each robot's infos also hold ground truth (``true_pose`` and the
+    ``privileged`` dict: world-frame pose and coverage), for evaluation only; never part of
+    an observation either way."""
 
     def __post_init__(self) -> None:
         check_fields(
@@ -225,7 +229,7 @@ class EnvConfig:
             positive=("dt", "flat_length_scale"),
             counts=("physics_substeps", "max_cycles"),
         )
-        for name in ("randomize_starts", "randomize_world", "flat_observation"):
+        for name in ("randomize_starts", "randomize_world", "flat_observation", "privileged"):
             value = getattr(self, name)
             require("EnvConfig", name, value, isinstance(value, bool), "a bool")
         if self.starts is not None:

@@ -105,23 +105,32 @@ Infos (per robot)
 -----------------
 ``collision`` (bool); ``observed_area`` (m², so far: the known area of the robot's map, or
 with SLAM off the area seen from the true poses); ``new_area`` (m², this step's own area
-reward before weighting); ``privileged``, a dict of ground-truth figures for evaluation
-and reward shaping only, never for a policy that claims not to know them: ``true_pose``
-(3,) world-frame pose, ``covered_area`` / ``team_covered_area`` (m² of the common
-world-frame grid covered by the robot / by any robot), ``coverage`` / ``team_coverage``
-(those over ``observable_area``) and ``team_new_area`` (m², this step's team novelty).
-``true_pose`` at the top level is the same privileged pose, kept for existing callers.
+reward before weighting). Flat numbers only, so that RL libraries that turn infos into
+tensors (TorchRL's ``PettingZooWrapper`` adds them to its observation spec) take them as
+they are.
+
+Ground truth only when asked for: with ``privileged=True`` (keyword or
+``EnvConfig.privileged``) each robot's infos also hold ``privileged``, a dict of
+ground-truth figures for evaluation only, never for a policy that claims not to know
+them: ``true_pose`` (3,) world-frame pose, ``covered_area`` / ``team_covered_area`` (m²
+of the common world-frame grid covered by the robot / by any robot), ``coverage`` /
+``team_coverage`` (those over ``observable_area``) and ``team_new_area`` (m², this step's
+team novelty); and ``true_pose`` at the top level, the same pose. (A nested dict: for
+evaluation code, not for a library that turns infos into tensors.) Ground truth is never
+part of an observation, its space or ``state()``; the team-novelty reward uses it either
+way.
 
 Arguments
 ---------
 ``parallel_env(scenario="office", n_robots=2, seed=None, render_mode=None, config=None,
-max_cycles=None)``: ``scenario`` is a name (``mrslam scenarios`` lists them;
+max_cycles=None, privileged=None)``: ``scenario`` is a name (``mrslam scenarios`` lists them;
 ``"procedural-7"`` picks a layout seed) or a :class:`~mrslam_env.sim.world.WorldSpec` (e.g.
 from a ROS map); ``seed`` seeds the first ``reset`` when it is given none; ``render_mode``
 is ``None``, ``"rgb_array"`` or ``"human"`` (the frame in a matplotlib window; without a
 display or matplotlib it warns once and draws nothing; ``render()`` returns None);
-``config`` an :class:`~mrslam_env.config.EnvConfig`; ``max_cycles`` overrides
-``config.max_cycles``. ``env(...)`` takes the same arguments.
+``config`` an :class:`~mrslam_env.config.EnvConfig`; ``max_cycles`` and ``privileged``
+override ``config.max_cycles`` and ``config.privileged``. ``env(...)`` takes the same
+arguments; any other keyword raises ``TypeError`` naming it and the known ones.
 
 Pickling
 --------
@@ -134,12 +143,14 @@ Version history
 * v0: initial release; onboard SLAM (``pose``, ``local_map``, map-based reward) added
   before the first tagged version; then (still v0) flat observations, ``state()``,
   ``max_cycles`` keyword, ``"human"`` rendering, once-per-cell area reward with team
-  novelty, ``privileged`` infos, varying episodes.
+  novelty, ``privileged`` infos, varying episodes; ground-truth infos only with
+  ``privileged=True``.
 """
 
 from __future__ import annotations
 
 import functools
+import inspect
 import os
 import sys
 import types
@@ -209,6 +220,7 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         render_mode: str | None = None,
         config: EnvConfig | None = None,
         max_cycles: int | None = None,
+        privileged: bool | None = None,
     ) -> None:
         if not isinstance(n_robots, int) or isinstance(n_robots, bool) or n_robots < 1:
             raise ValueError(f"n_robots must be an int >= 1, got {n_robots!r}")
@@ -224,6 +236,8 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         self.config = config if config is not None else EnvConfig()
         if max_cycles is not None:
             self.config = replace(self.config, max_cycles=max_cycles)
+        if privileged is not None:
+            self.config = replace(self.config, privileged=privileged)  # checked by EnvConfig
         self.render_mode = render_mode
         self.possible_agents = [f"robot_{i}" for i in range(n_robots)]
         self.agents = list(self.possible_agents)
@@ -596,22 +610,24 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
         for i, agent in enumerate(self.possible_agents):
             if agent not in self.agents:
                 continue
-            own_area = (float(self._observed[i].sum()) - self._unobservable_cells) * cell_area
-            true_pose = state.true_poses[i].copy()
-            infos[agent] = {
-                "true_pose": true_pose,
+            info: dict[str, Any] = {
                 "collision": bool(state.collisions[i]),
                 "observed_area": float(self._observed_area[i]),
                 "new_area": float(self._new_area[i]),
-                "privileged": {
+            }
+            if self.config.privileged:  # ground truth only when asked for
+                own_area = (float(self._observed[i].sum()) - self._unobservable_cells) * cell_area
+                true_pose = state.true_poses[i].copy()
+                privileged = {
                     "true_pose": true_pose.copy(),
                     "covered_area": own_area,
                     "coverage": own_area / observable,
                     "team_covered_area": team_area,
                     "team_coverage": team_area / observable,
                     "team_new_area": float(self._team_new_area[i]),
-                },
-            }
+                }
+                info = {"true_pose": true_pose, **info, "privileged": privileged}
+            infos[agent] = info
         return infos
 
     def _set_world(self, scenario: str | WorldSpec, keep: bool = False) -> None:
@@ -660,10 +676,24 @@ class MultiRobotSlamEnv(pettingzoo.ParallelEnv[AgentID, ObsDict, NDArray[np.floa
 
     # --- rendering ----------------------------------------------------------------------
 
-    def render(self) -> NDArray[np.uint8] | None:
+    def render(self, render_mode: str | None = None) -> NDArray[np.uint8] | None:
         """``"rgb_array"``: a top-down ``(H, W, 3)`` uint8 image (y up) of walls, robots
         and scans. ``"human"``: the same image in a matplotlib window (returns None);
-        without a display or matplotlib it warns once and draws nothing."""
+        without a display or matplotlib it warns once and draws nothing.
+
+        ``render_mode`` is there for RLlib's ``ParallelPettingZooEnv.render``, which
+        passes its own (None): None or the env's mode; the env's mode is used either way.
+
+        Raises
+        ------
+        ValueError
+            For another ``render_mode`` (the mode is chosen when the env is made).
+        """
+        if render_mode not in (None, self.render_mode):
+            raise ValueError(
+                f"render_mode is chosen when the env is made ({self.render_mode!r}), "
+                f"got {render_mode!r}"
+            )
         if self.render_mode is None:
             gymnasium.logger.warn("render() called without a render_mode; returning None")
             return None
@@ -827,8 +857,28 @@ def random_starts(
     return ((float(x), float(y), float(rng.uniform(-np.pi, np.pi))),)
 
 
+def checked_env_options(options: Mapping[str, Any]) -> None:
+    """Refuse constructor keywords that :class:`MultiRobotSlamEnv` does not take, all of
+    them named in one line with the known ones (a misspelling such as ``privilaged``
+    would otherwise be Python's error naming only the first).
+
+    Raises
+    ------
+    TypeError
+        As Python does for an unexpected keyword argument.
+    """
+    known = list(inspect.signature(MultiRobotSlamEnv.__init__).parameters)[1:]
+    unknown = [key for key in options if key not in known]
+    if unknown:
+        raise TypeError(
+            f"unknown env option {', '.join(repr(key) for key in unknown)}; "
+            f"the options are {', '.join(repr(key) for key in known)}"
+        )
+
+
 def parallel_env(**kwargs: Any) -> MultiRobotSlamEnv:
     """Create the parallel environment; arguments as :class:`MultiRobotSlamEnv`."""
+    checked_env_options(kwargs)
     return MultiRobotSlamEnv(**kwargs)
 
 

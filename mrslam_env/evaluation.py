@@ -238,6 +238,12 @@ class CoverageEvaluator:
                 inside = fine.contains(cells)
                 keep[inside] |= floor[cells[inside, 0], cells[inside, 1]]
         self.points = points[keep]
+        self.resolution = resolution
+
+    @property
+    def area(self) -> float:
+        """The reachable free area the coverage is a fraction of, m²."""
+        return len(self.points) * self.resolution**2
 
     def known(self, grid: GridMap, world_from_map: ArrayLike) -> NDArray[np.bool_]:
         """Which evaluation points ``grid`` knows, (P,) bool."""

@@ -94,6 +94,9 @@ _seed = _integer_from(0, "a non-negative integer")
 """argparse type of a seed."""
 
 
+SLAM_MODES = ("slam", "pose_graph", "odometry", "ground_truth")
+"""``mrslam run --slam-mode`` (mrslam_env.slam.config.SLAM_MODES, spelled out here: the
+command line starts on the standard library alone)."""
 MIN_RESOLUTION = 0.001
 MAX_RESOLUTION = 1.0
 """The range of ``scenarios --export --resolution``, m/cell (real maps: 0.01 to 0.1)."""
@@ -130,7 +133,11 @@ def _build_parser() -> argparse.ArgumentParser:
     run.add_argument("--map", type=Path, help="build the world from a ROS map YAML instead")
     run.add_argument("--seed", type=_seed, default=0)
     run.add_argument(
-        "--max-steps", type=int, default=3000, help="env steps of 0.1 s (default 3000)"
+        "--max-steps",
+        type=int,
+        default=None,
+        help="env steps of 0.1 s (default: from the building's reachable floor and the "
+        "team size, at least 3000)",
     )
     run.add_argument(
         "--out", type=Path, default=Path("runs"), help="parent folder of the run folder"
@@ -164,6 +171,13 @@ def _build_parser() -> argparse.ArgumentParser:
         ".py file (default: the frontier explorer; see agents/policy.py)",
     )
     run.add_argument("--robots", type=int, default=2, help="team size, 2 to 8 (default 2)")
+    run.add_argument(
+        "--slam-mode",
+        choices=SLAM_MODES,
+        default="slam",
+        help="each robot's onboard SLAM: slam (default), pose_graph (with loop closure), "
+        "odometry or ground_truth",
+    )
     run.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
 
     merge = commands.add_parser(
@@ -417,6 +431,7 @@ def _run(args: argparse.Namespace) -> int:
         until_merged=not args.stop_at_coverage,
         policy=args.policy,
         robots=args.robots,
+        slam_mode=args.slam_mode,
         progress=not args.json,
         overwrite=args.overwrite,
     )

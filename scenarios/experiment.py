@@ -66,7 +66,7 @@ import math
 import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, suppress
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -93,6 +93,7 @@ from mrslam_env.recording import Recorder, RecordingError, source_words
 from mrslam_env.registry import build_world
 from mrslam_env.sim.mapworld import check_world_extent, world_from_map
 from mrslam_env.sim.world import WorldSpec, ground_truth_map
+from mrslam_env.slam.config import SLAM_MODES, SlamConfig, SlamMode
 from scenarios.figure import no_merge_reason, summary_figure
 from scenarios.interrupts import RunInterrupted, noting_signals, raise_if_received, received
 from scenarios.run_folder import (
@@ -119,8 +120,9 @@ class RunConfig:
     map_path: Path | None = None
     """A ROS map YAML to build the world from."""
     seed: int = 0
-    max_steps: int = 3000
-    """Env steps (0.1 s each by default)."""
+    max_steps: int | None = None
+    """Env steps (0.1 s each by default); None: :func:`step_budget` of the world's
+    reachable floor and the team size."""
     out: Path = Path("runs")
     """Parent folder of the run folder."""
     name: str | None = None
@@ -146,6 +148,9 @@ class RunConfig:
     count towards coverage (the one-robot baseline; ``t90`` is for the whole floor)."""
     robots: int = 2
     """Team size, 2 to 8 (starts beyond the world's own are chosen by the simulator)."""
+    slam_mode: SlamMode = "slam"
+    """Each robot's onboard SLAM (:data:`mrslam_env.slam.config.SLAM_MODES`): ``"slam"``,
+    ``"pose_graph"`` (with loop closure), ``"odometry"`` or ``"ground_truth"``."""
     policy: str | None = None
     """The robots' exploration policy as ``module:factory`` (or ``path/file.py:factory``,
     :func:`agents.policy.load_policy_factory`); None: the frontier explorer."""
@@ -169,7 +174,7 @@ class RunConfig:
     numbered folder."""
 
     def __post_init__(self) -> None:
-        if self.max_steps < 1:
+        if self.max_steps is not None and self.max_steps < 1:
             raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
         for name in ("scan_every", "map_every", "coverage_every", "until_merged_idle"):
             if getattr(self, name) < 1:
@@ -178,11 +183,28 @@ class RunConfig:
             raise ValueError(f"target_coverage must be in (0, 1], got {self.target_coverage}")
         if self.oracle and (self.single or not self.interaction):
             raise ValueError("oracle needs interaction and two robots (not single)")
+        if self.slam_mode not in SLAM_MODES:
+            raise ValueError(f"slam_mode must be one of {SLAM_MODES}, got {self.slam_mode!r}")
         robots = self.robots
         if not isinstance(robots, int) or isinstance(robots, bool) or not 2 <= robots <= 8:
             raise ValueError(f"robots must be an integer from 2 to 8, got {robots!r}")
         if self.name is not None:
             check_run_name(self.name)
+
+
+MIN_STEPS = 3000
+"""The smallest default step budget (5 minutes of 0.1 s steps): time for a team to meet
+and verify a merge whatever the building's size."""
+ROBOT_STEPS_PER_M2 = 20.0
+"""The default budget per m² of reachable floor, in robot-steps (docs/decisions.md,
+"Step budget"): a team of n robots gets ``ROBOT_STEPS_PER_M2 * area / n`` steps."""
+
+
+def step_budget(free_area: float, robots: int) -> int:
+    """The default step budget of a run: the larger of :data:`MIN_STEPS` and
+    :data:`ROBOT_STEPS_PER_M2` ``* free_area / robots`` (``free_area`` in m² of floor the
+    robots can reach), so that a big building can be explored to the target coverage."""
+    return max(MIN_STEPS, math.ceil(ROBOT_STEPS_PER_M2 * free_area / robots))
 
 
 def resolve_world(
@@ -316,7 +338,7 @@ def run_experiment(config: RunConfig) -> dict[str, Any]:
 
 def _run_experiment(config: RunConfig) -> dict[str, Any]:
     comm = CommConfig() if config.comm else CommConfig(comm_range=1e-9)
-    env_config = EnvConfig(max_cycles=config.max_steps, comm=comm)
+    env_config = EnvConfig(comm=comm, slam=SlamConfig(mode=config.slam_mode))
     resolution = _grid_resolution(env_config)
     check_out(Path(config.out))
     world = resolve_world(config.scenario, config.map_path, config.seed, resolution=resolution)
@@ -328,11 +350,17 @@ def _run_experiment(config: RunConfig) -> dict[str, Any]:
         check_inputs_outside(Path(config.out) / name, inputs)
     check_world_extent(world.bounds, resolution)  # a scenario's world, too
     check_policy(config.policy, env_config)
+    max_steps = config.max_steps
+    if max_steps is None:
+        floor = CoverageEvaluator(world, world.starts, radius=env_config.robot.radius)
+        max_steps = step_budget(floor.area, config.robots)
+    env_config = replace(env_config, max_cycles=max_steps)
     # Setup, phase by phase; a signal noted in one ends the run before the next, with no
     # folder claimed (the kernels load here: a signal waits for the kernel to return).
     raise_if_received()
+    # Ground truth in the infos: the runs are judged (ATE) and drawn against it.
     env = MultiRobotSlamEnv(
-        scenario=world, n_robots=config.robots, seed=config.seed, config=env_config
+        scenario=world, n_robots=config.robots, seed=config.seed, config=env_config, privileged=True
     )
     raise_if_received()
     observations, infos = env.reset()
@@ -398,7 +426,7 @@ def _run_experiment(config: RunConfig) -> dict[str, Any]:
                     f"run {name}: world {world.name}, {len(agents)} robots, seed {config.seed}"
                 )
                 recorder.log_text("team/state", str(team.state))
-            with _progress(config.max_steps, config.progress) as bar:
+            with _progress(max_steps, config.progress) as bar:
                 while env.agents and received() is None:
                     if config.single:
                         actions = [team.act_alone(0, observations[agents[0]], maps(0))]
@@ -565,6 +593,7 @@ def _run_experiment(config: RunConfig) -> dict[str, Any]:
             "scenario": world.name,
             "seed": config.seed,
             "steps": steps,
+            "max_steps": max_steps,
             "sim_time_s": round(steps * env_config.dt, 6),
             "wall_time_s": round(wall_time, 3),
             "interaction": config.interaction,

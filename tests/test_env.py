@@ -106,7 +106,7 @@ def test_full_speed_never_inside_a_wall(scenario: str, tmp_path) -> None:
     the observations with SLAM are checked against their spaces by the API tests above.
     """
     steps = 2000
-    config = EnvConfig(max_cycles=steps, slam=None)
+    config = EnvConfig(max_cycles=steps, slam=None, privileged=True)
     e = MultiRobotSlamEnv(scenario=scenario, seed=1, config=config)
     observations, infos = e.reset()
     # Ground truth as a user gets it: exported to a ROS map and read back.
@@ -174,7 +174,7 @@ def test_non_finite_action_names_the_agent(bad: float) -> None:
 def test_out_of_range_actions_are_clipped() -> None:
     runs = []
     for action in ([1.0, -1.0], [7.0, -3.5]):
-        e = parallel_env(scenario=small_world())
+        e = parallel_env(scenario=small_world(), privileged=True)
         e.reset(seed=3)
         for _ in range(10):
             out = e.step({a: np.array(action) for a in e.agents})
@@ -205,7 +205,7 @@ def test_start_inside_a_wall_is_refused() -> None:
 
 
 def test_more_robots_get_automatic_starts() -> None:
-    e = parallel_env(scenario=small_world(), n_robots=4, seed=2)
+    e = parallel_env(scenario=small_world(), n_robots=4, seed=2, privileged=True)
     observations, infos = e.reset()
     assert e.agents == ["robot_0", "robot_1", "robot_2", "robot_3"]
     poses = np.array([infos[a]["true_pose"] for a in e.agents])

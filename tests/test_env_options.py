@@ -67,6 +67,22 @@ def test_the_single_robot_env_refuses_a_misspelled_option_too() -> None:
     made.reset(seed=0, options={"randomize_starts": True})
 
 
+def test_unknown_constructor_options_are_refused_by_name_in_one_line() -> None:
+    import mrslam_env
+
+    with pytest.raises(TypeError) as raised:
+        parallel_env(scenario=SMALL, privilaged=True, max_cycle=3)
+    message = str(raised.value)
+    assert "\n" not in message
+    assert "unknown env option 'privilaged', 'max_cycle';" in message
+    for key in ("scenario", "config", "max_cycles", "privileged"):
+        assert f"'{key}'" in message
+    with pytest.raises(TypeError, match="unknown env option 'privilaged'"):
+        mrslam_env.env(scenario=SMALL, privilaged=True)
+    with pytest.raises(TypeError, match="privilaged"):  # Python's own line names it
+        gymnasium.make(SINGLE_ROBOT_ID, scenario=SMALL, privilaged=True)
+
+
 def test_the_known_options_are_those_the_card_documents() -> None:
     import mrslam_env.env as module
     from mrslam_env.env import RESET_OPTIONS

@@ -111,7 +111,10 @@ def test_slam_modes_are_selectable() -> None:
     for agent in odometry.agents:  # odometry starts at zero: dead reckoning is the pose
         np.testing.assert_allclose(observations[agent]["pose"], observations[agent]["odom"])
     truth = MultiRobotSlamEnv(
-        scenario="office", seed=4, config=EnvConfig(slam=SlamConfig(mode="ground_truth"))
+        scenario="office",
+        seed=4,
+        config=EnvConfig(slam=SlamConfig(mode="ground_truth")),
+        privileged=True,
     )
     observations, _, infos = wander(truth, 40, seed=4)[-1]
     for i, agent in enumerate(truth.agents):

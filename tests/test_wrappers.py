@@ -85,8 +85,8 @@ def test_state_is_every_robots_flat_observation() -> None:
 
 
 def test_privileged_infos_are_named_and_not_observed() -> None:
-    env = MultiRobotSlamEnv(scenario=SMALL, seed=0, config=FAST, max_cycles=7)
-    assert env.config.max_cycles == 7
+    env = MultiRobotSlamEnv(scenario=SMALL, seed=0, config=FAST, max_cycles=7, privileged=True)
+    assert env.config.max_cycles == 7 and env.config.privileged
     observations, infos = env.reset()
     for agent in env.agents:
         privileged = infos[agent]["privileged"]
@@ -94,6 +94,25 @@ def test_privileged_infos_are_named_and_not_observed() -> None:
         assert {"covered_area", "coverage", "team_covered_area", "team_coverage"} <= set(privileged)
         assert 0.0 < privileged["coverage"] <= privileged["team_coverage"] <= 1.0
         assert "true_pose" not in observations[agent]
+        assert "true_pose" not in env.observation_space(agent).spaces
+
+
+@pytest.mark.parametrize("privileged", [None, False])
+def test_no_ground_truth_in_the_infos_unless_asked_for(privileged: bool | None) -> None:
+    # The default, and an explicit False: flat numbers only, the same as with ground truth.
+    env = MultiRobotSlamEnv(scenario=SMALL, seed=0, config=FAST, privileged=privileged)
+    told = MultiRobotSlamEnv(scenario=SMALL, seed=0, config=replace(FAST, privileged=True))
+    assert not env.config.privileged and told.config.privileged
+    results = [(env.reset()[1], told.reset()[1])]
+    actions = {agent: np.array([0.5, 0.2]) for agent in env.agents}
+    results.append((env.step(actions)[4], told.step(actions)[4]))
+    for infos, told_infos in results:
+        for agent in env.agents:
+            assert set(infos[agent]) == {"collision", "observed_area", "new_area"}
+            assert set(told_infos[agent]) == {*infos[agent], "true_pose", "privileged"}
+            assert all(infos[agent][key] == told_infos[agent][key] for key in infos[agent])
+    with pytest.raises(ValueError, match=r"EnvConfig\.privileged must be a bool, got 'yes'"):
+        MultiRobotSlamEnv(scenario=SMALL, privileged="yes")  # type: ignore[arg-type]
 
 
 def run_explorers(env: MultiRobotSlamEnv, steps: int):
@@ -117,7 +136,7 @@ def test_area_reward_is_paid_once_per_cell_and_never_negative() -> None:
     # drift cells back to unknown), and a reward of "known area now - before" went
     # negative without any collision. The reward now pays a cell the first time only.
     config = EnvConfig(reward=replace(EnvConfig().reward, team_novelty_weight=0.5))
-    env = MultiRobotSlamEnv(scenario="office", seed=0, config=config)
+    env = MultiRobotSlamEnv(scenario="office", seed=0, config=config, privileged=True)
     history = run_explorers(env, 200)
     shrinking = 0
     for agent in env.possible_agents:
@@ -146,7 +165,7 @@ def test_team_novelty_pays_only_area_no_teammate_knew(slam: bool) -> None:
     config = replace(config, reward=replace(reward, team_novelty_weight=1.0))
     if not slam:
         config = replace(config, slam=None)
-    env = MultiRobotSlamEnv(scenario=SMALL, seed=5, config=config)
+    env = MultiRobotSlamEnv(scenario=SMALL, seed=5, config=config, privileged=True)
     observations, infos = env.reset()
     team_start = infos["robot_0"]["privileged"]["team_covered_area"]
     policies = [WanderPolicy.for_env(config, np.random.default_rng(i)) for i in range(2)]
@@ -185,13 +204,15 @@ def starts_of(env: MultiRobotSlamEnv, seed: int, **options: object) -> np.ndarra
 
 
 def test_random_starts_per_episode_deterministic_per_seed() -> None:
-    env = MultiRobotSlamEnv(scenario=SMALL, config=FAST)
+    env = MultiRobotSlamEnv(scenario=SMALL, config=FAST, privileged=True)
     fixed = starts_of(env, 0)
     np.testing.assert_array_equal(fixed, starts_of(env, 1))  # the scenario's starts
     a, b = starts_of(env, 0, randomize_starts=True), starts_of(env, 1, randomize_starts=True)
     assert not np.array_equal(a, b) and not np.array_equal(a, fixed)
     np.testing.assert_array_equal(a, starts_of(env, 0, randomize_starts=True))
-    switch = MultiRobotSlamEnv(scenario=SMALL, config=replace(FAST, randomize_starts=True))
+    switch = MultiRobotSlamEnv(
+        scenario=SMALL, config=replace(FAST, randomize_starts=True), privileged=True
+    )
     np.testing.assert_array_equal(starts_of(switch, 0), a)
     assert (env.world.clearance(a[:, :2]) > FAST.robot.radius).all()
 

@@ -129,7 +129,7 @@ def _benchmark_scenario(
     ``odometry`` mode on the same data."""
     world = build_world(name)
     config = EnvConfig(max_cycles=steps, slam=slam_config)
-    env = MultiRobotSlamEnv(scenario=world, seed=seed, config=config)
+    env = MultiRobotSlamEnv(scenario=world, seed=seed, config=config, privileged=True)  # for ATE
     lidar = env.config.lidar
     observations, infos = env.reset(seed=seed)
     agents = list(env.possible_agents)

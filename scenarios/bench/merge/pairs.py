@@ -140,6 +140,9 @@ class PairGenerationConfig:
         """Folder name of this configuration's cached pairs (the onboard SLAM's defaults are
         part of it: maps made by another SLAM are other pairs)."""
         slam = asdict(SlamConfig())
+        # The pairs are mapped in mode "slam": the pose graph's settings are not theirs
+        # (and leaving them out keeps the keys of the sets made before it existed).
+        del slam["pose_graph"]
         fields = asdict(self)
         if not self.maps:  # keeps the keys of the sets made before map files were possible
             del fields["maps"]
@@ -270,7 +273,9 @@ def simulate_run(
     env_seed = int(np.random.SeedSequence(seed).generate_state(1)[0])
     pose = (float(start[0]), float(start[1]), float(start[2]))
     config = EnvConfig(max_cycles=steps, starts=(pose,))
-    env = MultiRobotSlamEnv(scenario=world, n_robots=1, seed=env_seed, config=config)
+    env = MultiRobotSlamEnv(
+        scenario=world, n_robots=1, seed=env_seed, config=config, privileged=True
+    )
     observations, infos = env.reset(seed=env_seed)
     lidar = env.config.lidar
     base = slam_config if slam_config is not None else SlamConfig()
