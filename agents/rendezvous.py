@@ -8,7 +8,12 @@ possible; the peer sensor then settles it: the other robot seen where predicted 
 the tolerances) accepts ``T``; a sighting elsewhere, or arriving and waiting without any
 sighting, rejects it.
 
-Pure functions on arrays and poses; the team coordinator (:mod:`agents.team`) drives them.
+Two more sensors check a hypothesis without a meeting: the peer sensor's silence where the
+hypothesis puts the other robot in plain sight (:func:`in_plain_sight`), and the radio
+link as a range sensor (:func:`radio_contradiction`, :func:`heading_allowance`).
+
+Pure functions on arrays and poses; the team's verification role
+(:mod:`agents.team_verification`) drives them.
 """
 
 from __future__ import annotations
@@ -24,12 +29,16 @@ from mrslam_env.gridmap import GridMap
 from mrslam_env.validation import check_fields
 
 __all__ = [
+    "SIGHT_BAND",
     "RendezvousConfig",
     "Sighting",
     "choose_meeting_point",
     "field_on_lattice",
+    "heading_allowance",
+    "in_plain_sight",
     "judge_sighting",
     "predicted_relative_pose",
+    "radio_contradiction",
     "sighting_pose",
 ]
 
@@ -151,3 +160,74 @@ def choose_meeting_point(
     flat = int(np.argmin(total))
     cell = np.array(np.unravel_index(flat, later.shape))
     return grid0.cell_to_world(cell[None, :])[0], float(later.flat[flat])
+
+
+# --- the peer sensor and the radio as checks of a hypothesis (design §6) ------------
+
+SIGHT_BAND = (-0.25, 0.0, 0.25)
+"""Offsets (m) of the lines of sight checked side by side."""
+
+
+def in_plain_sight(
+    pose: FloatArray, predicted: FloatArray, grid: GridMap, *, sight_range: float
+) -> bool:
+    """Whether a robot at ``predicted`` (its pose in the observer's body frame) would be
+    in the peer sensor's sight from ``pose`` (the observer's pose in ``grid``): closer than
+    ``sight_range`` (m, :attr:`agents.team_config.TeamConfig.in_sight_range`) and further
+    than 0.5 m, across cells ``grid`` knows to be free all the way, in a band
+    :data:`SIGHT_BAND` wide."""
+    distance = float(np.hypot(predicted[0], predicted[1]))
+    if not 0.5 < distance < sight_range:
+        return False
+    start = pose[:2]
+    end = transform_points(pose, predicted[None, :2])[0]
+    # A band, not a line: the prediction is only good to a few decimetres, and a wall
+    # corner just beside the line would hide the robot.
+    normal = np.array([start[1] - end[1], end[0] - start[0]]) / distance
+    line = start + np.linspace(0.0, 1.0, 50)[:, None] * (end - start)
+    samples = np.concatenate([line + offset * normal for offset in SIGHT_BAND])
+    cells = grid.world_to_cell(samples)
+    if not grid.contains(cells).all():
+        return False
+    return bool(grid.free[cells[:, 0], cells[:, 1]].all())
+
+
+def radio_contradiction(
+    hypothesis: FloatArray,
+    track0: FloatArray,
+    track1: FloatArray,
+    link: NDArray[np.bool_],
+    *,
+    comm_range: float,
+    exact: bool,
+    allowance: ArrayLike = 0.0,
+) -> float:
+    """How far (m) ``hypothesis`` (``side0_from_side1``) puts two robots outside what
+    their radio link said, at worst over the steps given: on a step the link was up, the
+    amount by which the robots' distance under the hypothesis exceeds ``comm_range``; on
+    one it was down (only if the link is up ``exact``-ly within ``comm_range``), the
+    amount by which it falls short of it; less the step's ``allowance`` (m, scalar or
+    (T,): the error a true hypothesis may have there). ``track0`` (T, 2) and ``track1``
+    (T, 2) are the robots' positions in their side's frame on those steps, ``link`` (T,)
+    whether the link was up. Negative (or -inf for no step) when the hypothesis agrees
+    with the radio."""
+    if len(link) == 0:
+        return -math.inf
+    predicted = transform_points(hypothesis, np.asarray(track1, dtype=np.float64))
+    distance = np.hypot(*(predicted - np.asarray(track0, dtype=np.float64)).T)
+    down = comm_range - distance if exact else np.full_like(distance, -math.inf)
+    return float((np.where(link, distance - comm_range, down) - allowance).max())
+
+
+def heading_allowance(track: FloatArray, known: FloatArray, tolerance: float) -> FloatArray:
+    """(T,) m: how far a heading error of ``tolerance`` (rad) moves each place of
+    ``track`` (T, 2) about a pivot anywhere in the box bounding ``known`` (K, 2; the
+    robot's whole track, where the maps that pin the hypothesis were made): the tangent
+    times the distance to the box's farthest corner."""
+    track = np.asarray(track, dtype=np.float64).reshape(-1, 2)
+    known = np.asarray(known, dtype=np.float64).reshape(-1, 2)
+    if len(known) == 0 or len(track) == 0:
+        return np.zeros(len(track))
+    low, high = known.min(axis=0), known.max(axis=0)
+    reach = np.maximum(np.abs(track - low), np.abs(track - high))
+    return math.tan(tolerance) * np.hypot(*reach.T)

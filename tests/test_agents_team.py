@@ -54,8 +54,8 @@ def verify(
     # The hypothesis under test is injected as if the merge had proposed it.
     team.hypotheses = [hypothesis]
     team._last_poses = [observations[a]["pose"] for a in agents]
-    team._retry_area = {(0, 1): np.inf}  # no new merge attempt during the test
-    team._start_rendezvous(0, maps)
+    team.proposals.retry_area = {(0, 1): np.inf}  # no new merge attempt during the test
+    team.verification.start(0, maps)
     assert team.state is TeamState.HYPOTHESIS_VERIFICATION
     decisions: list[Decision] = []
     for _ in range(steps):
@@ -177,7 +177,7 @@ def _in_sight_team(
     observations, _ = env.reset()
     maps = MapCache(env)
     team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0))
-    team._retry_area = {(0, 1): np.inf}
+    team.proposals.retry_area = {(0, 1): np.inf}
     team.act([observations[a] for a in env.possible_agents], maps)
     return env, team, maps, observations
 
@@ -210,7 +210,7 @@ def test_a_hypothesis_that_puts_the_robots_in_sight_is_settled_where_they_stand(
         env, team, maps, observations = _in_sight_team(starts)
         team.pop_decisions()
         team.hypotheses = [hypothesis]
-        team._start_rendezvous(0, maps)
+        team.verification.start(0, maps)
         decisions = [d.text for d in team.pop_decisions()]
         assert team.hypotheses_tested == 1
         if accepted:
@@ -235,7 +235,7 @@ def test_refinement_never_leaves_what_the_rendezvous_verified() -> None:
     at = np.array([3.0, -1.0])
 
     def within(transform: np.ndarray) -> bool:
-        return team._within_verified(transform, verified, at)
+        return team.verification.within_verified(transform, verified, at)
 
     tolerance = team.config.rendezvous.position_tolerance
     assert within(compose(verified, [0.1, -0.1, 0.01]))
@@ -290,8 +290,8 @@ def test_with_the_link_down_each_robot_sees_all_of_its_own_mapping() -> None:
 
     own = [known(0.0, 3.0), known(6.0, 9.0)]  # one frame: the transform is the identity
     team.state, team.roots = TeamState.COORDINATED_EXPLORATION, [0, 0]
-    team._received = {(0, 1): own[1], (1, 0): own[0]}
-    team._fuse(lambda i: own[i], shared=True)
+    team.groups.received = {(0, 1): own[1], (1, 0): own[0]}
+    team.groups.fuse(lambda i: own[i], shared=True)
     assert team.views[0] is team.views[1] is team.merged_map
     # The link goes down and both robots map on: each view has its own robot's new cells
     # and only the other's as last received.
@@ -299,7 +299,7 @@ def test_with_the_link_down_each_robot_sees_all_of_its_own_mapping() -> None:
     own[:] = [known(0.0, 4.0), known(5.0, 9.0)]
     team.step += 5
     team._reach = down
-    team._keep_merged_map(lambda i: own[i])
+    team.groups.keep_merged_map(lambda i: own[i])
     view0, view1 = team.views
     assert view0 is not None and view1 is not None and view0 is team.merged_map
     assert (state(view0, 3.5), state(view0, 5.5)) == (FREE, UNKNOWN)
@@ -307,11 +307,11 @@ def test_with_the_link_down_each_robot_sees_all_of_its_own_mapping() -> None:
     # Not yet due: nothing is refreshed.
     team.step += 1
     team._reach = up
-    team._keep_merged_map(lambda i: own[i])
+    team.groups.keep_merged_map(lambda i: own[i])
     assert team.views == [view0, view1]
     # The link is back: one view with everything.
     team.step += 4
-    team._keep_merged_map(lambda i: own[i])
+    team.groups.keep_merged_map(lambda i: own[i])
     assert team.views[0] is team.views[1]
     assert (state(team.views[0], 3.5), state(team.views[0], 5.5)) == (FREE, FREE)
 
@@ -342,16 +342,16 @@ def test_the_drive_for_one_hypothesis_tests_the_others_waiting() -> None:
         hypothesis=driving, index=0, meeting_point=np.array([8.0, 5.0]), started=0
     )
     for _ in range(UNSEEN_STEPS - 1):
-        team._test_waiting(rendezvous, poses, lambda i: free)
+        team.verification.test_waiting(rendezvous, poses, lambda i: free)
     assert not team.rejected
-    team._test_waiting(rendezvous, poses, lambda i: free)
+    team.verification.test_waiting(rendezvous, poses, lambda i: free)
     assert len(team.rejected) == 1 and team.rejected[0] is in_sight
     assert team.hypotheses_tested == 1
     assert any("#1 rejected on the way to #0" in d.text for d in team.pop_decisions())
     # Its turn never comes: the next rendezvous is for the one still untested.
     team._last_poses = poses
-    team._meeting_point = lambda hypothesis, maps: (np.array([12.0, 5.0]), 3.0)  # type: ignore[method-assign]
-    team._start_rendezvous(1, lambda i: free)
+    team.verification.meeting_point = lambda hypothesis, maps: (np.array([12.0, 5.0]), 3.0)  # type: ignore[method-assign]
+    team.verification.start(1, lambda i: free)
     assert team.rendezvous is not None and team.rendezvous.hypothesis is far
 
 
@@ -361,7 +361,7 @@ def _links_at(team: TeamCoordinator, up: bool, poses: list[list[float]]) -> None
     team.step += 1
     team._poses = [np.array(p, dtype=np.float64) for p in poses]
     team._links = np.array([[False, up], [up, False]])
-    team._seek_contact()
+    team.contact.seek()
 
 
 def test_contact_seeking_goes_back_to_where_the_link_was_last_up() -> None:
@@ -369,13 +369,13 @@ def test_contact_seeking_goes_back_to_where_the_link_was_last_up() -> None:
     team = TeamCoordinator(config, rng=np.random.default_rng(0))
     for _ in range(100):  # never had a link: both explore on, whatever the time
         _links_at(team, False, [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
-    assert team._seeking == [None, None] and not any(team._on_goal)
+    assert team.contact.seeking == [None, None] and not any(team._on_goal)
     _links_at(team, True, [[2.0, 1.0, 0.0], [-3.0, 4.0, 0.0]])  # the last link, step 101
     for _ in range(49):
         _links_at(team, False, [[10.0, 1.0, 0.0], [-3.0, 15.0, 0.0]])
     assert not any(team._on_goal)
     _links_at(team, False, [[10.0, 1.0, 0.0], [-3.0, 15.0, 0.0]])  # 50 steps without
-    assert all(team._on_goal) and team._seeking == [(151, None), (151, None)]
+    assert all(team._on_goal) and team.contact.seeking == [(151, None), (151, None)]
     np.testing.assert_allclose(team.explorers[0]._given_goal, [2.0, 1.0])
     np.testing.assert_allclose(team.explorers[1]._given_goal, [-3.0, 4.0])
     decisions = [d.text for d in team.pop_decisions()]
@@ -384,7 +384,7 @@ def test_contact_seeking_goes_back_to_where_the_link_was_last_up() -> None:
     for _ in range(10):
         _links_at(team, False, [[6.0, 1.0, 0.0], [-3.0, 9.0, 0.0]])
     _links_at(team, True, [[5.0, 1.0, 0.0], [-3.0, 8.0, 0.0]])
-    assert team._seeking == [None, None] and not any(team._on_goal)
+    assert team.contact.seeking == [None, None] and not any(team._on_goal)
     assert team.seeking_steps == [10, 10]
     assert any("link up again" in d.text for d in team.pop_decisions())
 
@@ -402,7 +402,7 @@ def test_contact_seeking_waits_at_the_place_then_explores_again() -> None:
     team.explorers[0].status = "arrived"  # robot 0's leg to the place ends
     _links_at(team, False, [[0.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
     arrived = team.step
-    assert team._seeking == [(started, arrived), (started, None)]
+    assert team.contact.seeking == [(started, arrived), (started, None)]
     for _ in range(19):
         _links_at(team, False, [[0.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
     assert all(team._on_goal)
@@ -412,7 +412,7 @@ def test_contact_seeking_waits_at_the_place_then_explores_again() -> None:
         _links_at(team, False, [[0.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
     assert all(team._on_goal)
     _links_at(team, False, [[0.0, 0.0, 0.0], [3.0, 0.0, 0.0]])  # 30 steps since it began
-    assert team._seeking == [None, None] and not any(team._on_goal)
+    assert team.contact.seeking == [None, None] and not any(team._on_goal)
     decisions = [d.text for d in team.pop_decisions()]
     assert any("robot_0: contact seeking ends (no link at the place" in d for d in decisions)
     assert any("robot_1: contact seeking ends (not back" in d for d in decisions)
@@ -465,7 +465,7 @@ def test_a_match_where_they_stand_lost_from_sight_is_confirmed_at_a_meeting() ->
     env, team, maps, observations = _in_sight_team(starts)
     agents = env.possible_agents
     team.hypotheses = [truth]
-    team._start_rendezvous(0, maps)
+    team.verification.start(0, maps)
     assert team.rendezvous is not None and team.rendezvous.in_place
     # The robots part: the peer sensor sees nothing for UNSEEN_STEPS steps.
     for _ in range(UNSEEN_STEPS):
@@ -585,11 +585,11 @@ def test_a_hypothesis_from_sightings_whose_maps_conflict_is_rejected_at_once() -
         observations, *_ = env.step({a: actions[i] for i, a in enumerate(env.possible_agents)})
     sides = team._side_maps(maps)
     poses = [team.pose_in_root(r, team._poses[r]) for r in team.pair]
-    assert team._map_check(sides(0), sides(1), truth) is None
+    assert team.proposals.map_check(sides(0), sides(1), truth) is None
     turned = compose(truth, [0.0, 0.0, np.pi / 2])
-    assert team._map_check(sides(0), sides(1), turned) is not None
+    assert team.proposals.map_check(sides(0), sides(1), turned) is not None
     team.pop_decisions()
-    assert not team._form_from_sightings(turned, sides, poses)
+    assert not team.proposals.form_from_sightings(turned, sides, poses)
     assert team.rendezvous is None and team.state is TeamState.NO_INTERACTION
     assert any("the maps conflict" in d.text for d in team.pop_decisions())
 
@@ -614,8 +614,8 @@ def test_a_teammate_unheard_for_long_is_forgotten() -> None:
         actions = team.act(given, maps)
         observations, *_ = env.step({a: actions[i] for i, a in enumerate(agents)})
         if step == memory:
-            assert (0, 1) in team._shared  # held for ``teammate_memory`` steps
-    assert (0, 1) not in team._shared and (1, 0) not in team._shared
+            assert (0, 1) in team.allocation.shared  # held for ``teammate_memory`` steps
+    assert (0, 1) not in team.allocation.shared and (1, 0) not in team.allocation.shared
 
 
 def test_a_hypothesis_from_sightings_is_rejected_when_slam_drifts_between_meetings() -> None:
@@ -656,24 +656,24 @@ def test_the_merge_goes_on_while_a_hypothesis_from_sightings_waits() -> None:
     _run_team(env, team, maps, observations, 12)
     waiting = team.rendezvous
     assert waiting is not None and waiting.formed_at is not None
-    assert team._waiting_on_sightings()
+    assert team.proposals.waiting_on_sightings()
 
     def nothing(sides: Any) -> bool:  # a merge with no hypothesis worth a rendezvous
         team._rest()
         return True
 
-    team._generate = nothing  # type: ignore[method-assign]
-    team._generate_beside_sightings(maps)
+    team.proposals.generate = nothing  # type: ignore[method-assign]
+    team.proposals.generate_beside_sightings(maps)
     assert team.rendezvous is waiting and team.state is TeamState.HYPOTHESIS_VERIFICATION
 
     def one(sides: Any) -> bool:  # a merge with one
         team.hypotheses = [truth]
-        team._start_rendezvous(0, sides)
+        team.verification.start(0, sides)
         return True
 
-    team._generate = one  # type: ignore[method-assign]
+    team.proposals.generate = one  # type: ignore[method-assign]
     team.pop_decisions()
-    team._generate_beside_sightings(maps)
+    team.proposals.generate_beside_sightings(maps)
     assert team.rendezvous is not None and team.rendezvous.formed_at is None
     assert any("set aside for the merge's" in d.text for d in team.pop_decisions())
 
@@ -688,11 +688,11 @@ def _undecided_team(
     maps = MapCache(env)
     config = TeamConfig(undecided_wait=wait, departure_share=share)
     team = TeamCoordinator(config, rng=np.random.default_rng(0))
-    team._retry_area = {(0, 1): np.inf}  # no new merge attempt during the test
+    team.proposals.retry_area = {(0, 1): np.inf}  # no new merge attempt during the test
     team.act([observations[a] for a in env.possible_agents], maps)
     team.hypotheses = [hypothesis]
-    team._undecided = [hypothesis]
-    team._start_rendezvous(0, maps)
+    team.proposals.undecided = [hypothesis]
+    team.verification.start(0, maps)
     return env, team, maps, observations
 
 
@@ -714,7 +714,9 @@ def test_a_hypothesis_the_merge_left_undecided_is_tested_while_the_robots_explor
 def test_a_hypothesis_the_merge_left_undecided_is_met_for_after_its_wait() -> None:
     wrong = compose(TRUE_TRANSFORM, [-6.0, 0.0, 0.0])
     env, team, maps, observations = _undecided_team(wrong, wait=30)
-    team._meeting_point = lambda hypothesis, maps, avoid=None: (np.array([2.5, 0.1]), 3.0)  # type: ignore[method-assign]
+    team.verification.meeting_point = (  # type: ignore[method-assign]
+        lambda hypothesis, maps, avoid=None: (np.array([2.5, 0.1]), 3.0)
+    )
 
     def blind(step: int, given: list[dict[str, Any]]) -> list[dict[str, Any]]:
         return [{**o, "peer": np.zeros_like(o["peer"])} for o in given]
@@ -734,20 +736,20 @@ def test_a_waiting_hypothesis_kept_beside_a_regrown_merge_keeps_its_rivals() -> 
     wrong = compose(TRUE_TRANSFORM, [-6.0, 0.0, 0.0])
     rival = compose(TRUE_TRANSFORM, [6.0, 0.0, 0.0])
     _, team, maps, _ = _undecided_team(wrong, wait=300)
-    team.hypotheses, team._undecided = [wrong, rival], [wrong, rival]
+    team.hypotheses, team.proposals.undecided = [wrong, rival], [wrong, rival]
     tested = team.hypotheses_tested
     regrown = wrong.copy()
 
     def again(sides: Any) -> bool:
-        team.hypotheses, team._undecided = [regrown], [regrown]
-        team._start_rendezvous(0, sides)
+        team.hypotheses, team.proposals.undecided = [regrown], [regrown]
+        team.verification.start(0, sides)
         return True
 
-    team._generate = again  # type: ignore[method-assign]
+    team.proposals.generate = again  # type: ignore[method-assign]
     team._link = True
-    team._generate_beside_sightings(maps)
+    team.proposals.generate_beside_sightings(maps)
     assert team.rendezvous is not None and team.rendezvous.hypothesis is wrong
-    assert not team._is_decided(rival)
+    assert not team.proposals.is_decided(rival)
     assert team.hypotheses_tested == tested
 
 
@@ -755,10 +757,12 @@ def test_the_merges_own_answer_is_driven_to_at_once() -> None:
     wrong = compose(TRUE_TRANSFORM, [-6.0, 0.0, 0.0])
     _, team, maps, _ = _undecided_team(wrong, wait=300)
     team._rest()
-    team._undecided = []  # the same hypothesis, now the merge's own answer
+    team.proposals.undecided = []  # the same hypothesis, now the merge's own answer
     team.hypotheses = [wrong]
-    team._meeting_point = lambda hypothesis, maps, avoid=None: (np.array([2.5, 0.1]), 3.0)  # type: ignore[method-assign]
-    team._start_rendezvous(0, maps)
+    team.verification.meeting_point = (  # type: ignore[method-assign]
+        lambda hypothesis, maps, avoid=None: (np.array([2.5, 0.1]), 3.0)
+    )
+    team.verification.start(0, maps)
     assert team.rendezvous is not None and not team.rendezvous.in_place
     assert all(team._on_goal)
 
@@ -766,15 +770,15 @@ def test_the_merges_own_answer_is_driven_to_at_once() -> None:
 def test_the_robot_nearer_the_meeting_point_explores_on_before_it_leaves() -> None:
     env, team, maps, observations = _undecided_team(TRUE_TRANSFORM, wait=300, share=0.5)
     team._rest()
-    team._undecided = []
+    team.proposals.undecided = []
     team.hypotheses = [TRUE_TRANSFORM]
 
     def meeting(hypothesis: Any, maps: Any, avoid: Any = None) -> tuple[np.ndarray, float]:
-        team._meeting_costs = (2.0, 4.0)  # robot 0's way is 2 m shorter
+        team.verification.meeting_costs = (2.0, 4.0)  # robot 0's way is 2 m shorter
         return np.array([3.0, 0.2]), 4.0  # (7.0, 8.2) in the world
 
-    team._meeting_point = meeting  # type: ignore[method-assign]
-    team._start_rendezvous(0, maps)
+    team.verification.meeting_point = meeting  # type: ignore[method-assign]
+    team.verification.start(0, maps)
     # Half of 2 m at the cruise speed (0.8 m/s, 0.1 s a step): 12 steps.
     assert team.rendezvous is not None and team.rendezvous.hold == (0, team.step + 12)
     assert team._on_goal == [False, True]
@@ -860,15 +864,15 @@ def test_a_merge_answer_the_radio_rules_out_is_rejected_without_a_drive(
     observations, _ = env.reset()
     maps = MapCache(env)
     team = TeamCoordinator(TeamConfig(min_map_area=0.0), rng=np.random.default_rng(0))
-    team._retry_area = {(0, 1): np.inf}
+    team.proposals.retry_area = {(0, 1): np.inf}
     _run_team(env, team, maps, observations, 5)
     far = compose(TRUE_TRANSFORM, [-15.0, 0.0, 0.0])
     answers = [SimpleNamespace(map1_from_map2=h, confident=True) for h in (far, TRUE_TRANSFORM)]
     result = SimpleNamespace(transform=None, hypotheses=answers)
-    monkeypatch.setattr("agents.team.merge_maps", lambda *args, **kwargs: result)
-    team._retry_area = {}
+    monkeypatch.setattr("agents.team_proposals.merge_maps", lambda *args, **kwargs: result)
+    team.proposals.retry_area = {}
     team._link = True
-    assert team._generate(team._side_maps(maps))
+    assert team.proposals.generate(team._side_maps(maps))
     decisions = [d.text for d in team.pop_decisions()]
     assert any("rejected by the radio" in d for d in decisions), decisions
     assert len(team.rejected) == 1 and team.rejected[0] is far
@@ -886,10 +890,12 @@ def test_a_drive_ends_when_the_link_is_back_after_a_drop_the_hypothesis_cannot_e
     wrong = compose(TRUE_TRANSFORM, [-1.0, 0.0, 0.0])
     env, team, maps, observations = _undecided_team(wrong, wait=300)
     team._rest()
-    team._undecided = []
+    team.proposals.undecided = []
     team.hypotheses = [wrong]
-    team._meeting_point = lambda hypothesis, maps, avoid=None: (np.array([2.5, 0.1]), 3.0)  # type: ignore[method-assign]
-    team._start_rendezvous(0, maps)
+    team.verification.meeting_point = (  # type: ignore[method-assign]
+        lambda hypothesis, maps, avoid=None: (np.array([2.5, 0.1]), 3.0)
+    )
+    team.verification.start(0, maps)
     assert team.rendezvous is not None and not team.rendezvous.in_place
 
     def link_drops(step: int, given: list[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -188,8 +188,8 @@ def test_the_team_verifies_by_rendezvous_whatever_the_policy(forward_module: Pat
     assert not any(isinstance(p, ExplorerPolicy) for p in team.policies)
     team.hypotheses = [TRUE_TRANSFORM]
     team._last_poses = [observations[a]["pose"] for a in agents]
-    team._retry_area = {(0, 1): np.inf}
-    team._start_rendezvous(0, maps)
+    team.proposals.retry_area = {(0, 1): np.inf}
+    team.verification.start(0, maps)
     assert team.state is TeamState.HYPOTHESIS_VERIFICATION and all(team._on_goal)
     decisions: list[str] = []
     for _ in range(600):

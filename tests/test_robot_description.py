@@ -240,7 +240,7 @@ def test_the_team_judges_plain_sight_by_the_env_peer_sensor() -> None:
             hypothesis=driving, index=0, meeting_point=np.array([8.0, 5.0]), started=0
         )
         for _ in range(UNSEEN_STEPS):
-            team._test_waiting(rendezvous, poses, lambda i: free)
+            team.verification.test_waiting(rendezvous, poses, lambda i: free)
         return any(h is waiting for h in team.rejected)
 
     assert TeamConfig.for_env(ENV).in_sight_range == 7.0

@@ -75,7 +75,7 @@ def test_transforms_compose_along_the_graph_and_robots_join_with_their_group() -
     # Robots 1 and 2 meet first: one group in robot 1's frame, not yet the common one.
     team._set_pair(2, 1)
     assert team.pair == (1, 2)
-    team._join(t12, t12, np.zeros(2))
+    team.groups.join(t12, t12, np.zeros(2))
     assert team.roots == [0, 1, 1, 3] and team.members == [0]
     assert np.allclose(team.frames[2], t12) and team.step_joined[2] is None
     assert all(not p.frames for p in team.policies)  # type: ignore[attr-defined]
@@ -83,7 +83,7 @@ def test_transforms_compose_along_the_graph_and_robots_join_with_their_group() -
     # frame) in robot 0's; the whole group joins, its transforms composed.
     team._set_pair(2, 0)
     assert team.pair == (0, 2)
-    team._join(t01, t01, np.zeros(2))
+    team.groups.join(t01, t01, np.zeros(2))
     t02 = compose(t01, t12)
     assert team.members == [0, 1, 2] and team.roots[3] == 3
     assert np.allclose(team.common_transform(1), t01)
@@ -112,14 +112,16 @@ def test_a_join_outside_the_common_frame_leaves_robot_0_its_current_map() -> Non
     team._set_pair(1, 2)
     team._last_poses = [np.zeros(3), np.zeros(3)]
     t12 = compose(inverse(truth[1]), truth[2])
-    team._accept(_Rendezvous(t12, 0, np.zeros(2), 0), team._side_maps(team._maps), "seen", 0.0)
+    team.verification.accept(
+        _Rendezvous(t12, 0, np.zeros(2), 0), team._side_maps(team._maps), "seen", 0.0
+    )
     assert team.roots == [0, 1, 1] and team.members == [0]
     # Robot 0 has no teammate in its frame: no merged view, and its side of its next
     # merge is its map as it is then, not as it was at the others' join.
     assert team.merged_map is None and not team.coordinated(0)
     current[0] = own[1]  # robot 0's map has grown (any other map will do)
     team.step += team.config.merged_map_every
-    assert team._group_map(0, team._maps) is own[1]
+    assert team.groups.group_map(0, team._maps) is own[1]
 
 
 def test_a_group_of_three_is_refined_jointly_not_chained() -> None:
@@ -131,10 +133,10 @@ def test_a_group_of_three_is_refined_jointly_not_chained() -> None:
     t12 = compose(compose(inverse(truth[1]), truth[2]), off)
     t01 = compose(truth[1], off)
     team._set_pair(1, 2)
-    team._join(t12, t12, np.zeros(2))
+    team.groups.join(t12, t12, np.zeros(2))
     assert np.allclose(team.frames[2], t12)  # a group of two: the one edge as it is
     team._set_pair(0, 1)
-    team._join(t01, t01, np.zeros(2))
+    team.groups.join(t01, t01, np.zeros(2))
     decisions = [d.text for d in team.pop_decisions()]
     assert any("refined jointly on 3 overlapping pairs" in d for d in decisions), decisions
     for k in (1, 2):
@@ -157,11 +159,11 @@ def test_a_group_of_three_is_refined_again_jointly_on_the_grown_maps() -> None:
     )
     team._maps = lambda i: own[i]
     team._set_pair(1, 2)
-    team._join(
+    team.groups.join(
         compose(inverse(truth[1]), truth[2]), compose(inverse(truth[1]), truth[2]), np.zeros(2)
     )
     team._set_pair(0, 1)
-    team._join(truth[1], truth[1], np.zeros(2))
+    team.groups.join(truth[1], truth[1], np.zeros(2))
     team._rest()
     team._reach[:] = True
     # The transforms as a join on smaller maps might have left them, within what the
@@ -172,7 +174,7 @@ def test_a_group_of_three_is_refined_again_jointly_on_the_grown_maps() -> None:
         team.frames[k] = compose(team.frames[k], off)
     team.pop_decisions()
     team.step += 10
-    team._keep_merged_map(team._maps)
+    team.groups.keep_merged_map(team._maps)
     decisions = [d.text for d in team.pop_decisions()]
     assert any("refined jointly on 3 overlapping pairs" in d for d in decisions), decisions
     for k in (1, 2):
@@ -191,12 +193,12 @@ def test_the_common_frame_shares_one_map_and_every_teammate() -> None:
     grid = GridMap(cells=cells, resolution=0.1)
     team.roots, team.frames = [0, 0, 0], [np.zeros(3), np.array([2.0, 0.0, 0.0]), np.zeros(3)]
     team._reach = np.ones((3, 3), dtype=bool)
-    team._received = {(i, j): grid for i in range(3) for j in range(3) if i != j}
-    team._fuse(lambda i: grid, shared=True)
+    team.groups.received = {(i, j): grid for i in range(3) for j in range(3) if i != j}
+    team.groups.fuse(lambda i: grid, shared=True)
     assert team.views[0] is team.views[1] is team.views[2] is team.merged_map
     observations = [{"pose": np.array([1.0 + i, 3.0, 0.0])} for i in range(3)]
     team._poses = [o["pose"] for o in observations]
-    team._act_coordinated(observations, lambda i: grid)
+    team.allocation.act(observations, lambda i: grid)
     for i, policy in enumerate(team.policies):
         context = policy.contexts[-1]  # type: ignore[attr-defined]
         assert context.in_common_frame and context.map is team.merged_map
@@ -207,8 +209,8 @@ def test_the_common_frame_shares_one_map_and_every_teammate() -> None:
     # holds (its own map and robot 2's), in the common frame.
     far = GridMap(cells=cells, resolution=0.1, origin=(-20.0, 0.0))  # robot 0's, 20 m west
     own = [far, grid, grid]
-    team._received = {(0, 1): grid, (0, 2): grid, (1, 2): grid, (2, 0): far, (2, 1): grid}
-    team._fuse(lambda i: own[i], shared=False)
+    team.groups.received = {(0, 1): grid, (0, 2): grid, (1, 2): grid, (2, 0): far, (2, 1): grid}
+    team.groups.fuse(lambda i: own[i], shared=False)
     view0, view1, view2 = team.views
     assert view0 is not None and view1 is not None and view2 is not None
     assert view0.origin[0] == pytest.approx(-20.0) and view2.origin[0] == pytest.approx(-20.0)
@@ -234,7 +236,7 @@ def _office_team_of_three() -> tuple[MultiRobotSlamEnv, dict, MapCache, TeamCoor
     obs, _ = env.reset()
     maps = MapCache(env)
     team = TeamCoordinator(TeamConfig(), rng=np.random.default_rng(0), n_robots=3)
-    team._retry_area = {pair: np.inf for pair in ((0, 1), (0, 2), (1, 2))}
+    team.proposals.retry_area = {pair: np.inf for pair in ((0, 1), (0, 2), (1, 2))}
     team.act([obs[a] for a in env.possible_agents], maps)
     return env, obs, maps, team
 
@@ -247,7 +249,7 @@ def test_any_pair_is_verified_by_rendezvous_and_three_robots_end_in_one_frame() 
         team._set_pair(a, b)
         team._observe_pair([obs[x] for x in agents])
         team.hypotheses = [hypothesis]
-        team._start_rendezvous(0, team._side_maps(maps))
+        team.verification.start(0, team._side_maps(maps))
 
     put(0, 1, compose(TRUTH[1], [0.08, -0.05, 0.02]))  # a merge's small error
     obs = _settle(team, env, maps, obs)
@@ -323,10 +325,10 @@ def test_a_robot_that_cannot_reach_the_meeting_point_sets_the_hypothesis_aside()
     team._observe_pair([obs[a] for a in agents])
     # Far enough apart that the robots must drive to meet.
     team.hypotheses = [compose(TRUTH[2], [0.0, 0.0, 0.02])]
-    team._start_rendezvous(0, team._side_maps(maps))
+    team.verification.start(0, team._side_maps(maps))
     assert team.state is TeamState.HYPOTHESIS_VERIFICATION and not team.rendezvous.in_place  # type: ignore[union-attr]
     team.explorers[2].status = "goal_unreachable"  # its map holds no way there
-    team._verify(team._last_observations, team._side_maps(maps), link=False)
+    team.verification.verify(team._last_observations, team._side_maps(maps), link=False)
     decisions = [d.text for d in team.pop_decisions()]
     # Not evidence against the hypothesis: set aside (proposed again later), not rejected.
     assert any("set aside: robot_2 cannot reach" in d for d in decisions), decisions
