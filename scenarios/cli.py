@@ -252,9 +252,10 @@ def _build_parser() -> argparse.ArgumentParser:
     explore.add_argument("--jobs", type=_count, default=1, help="runs at a time (default 1)")
     explore.add_argument(
         "--modes",
-        default="team,independent,oracle,single",
+        default="team,independent,oracle,single,late-oracle",
         help="comma-separated runs per scenario and seed, of team, independent, oracle, "
-        "single (default: all four)",
+        "single, late-oracle (independent robots given the team run's own transforms at "
+        "its own verification step; needs team) (default: all five)",
     )
     explore.add_argument(
         "--policy",

@@ -143,6 +143,13 @@ class RunConfig:
     """True: the team knows the robots' relative pose from step 0 (the true
     ``map0_from_map1``, from the env's start poses) and explores coordinated from the
     start, as after a verified merge: the benchmark's upper bound for coordination."""
+    given_at: int | None = None
+    """The late oracle: the robots explore independently until this step, when the team
+    is given ``given_transforms`` and coordinates from then on as the oracle does (the
+    benchmark gives a team run's own transforms at its own verification step, so the
+    time the verification costs is measured)."""
+    given_transforms: tuple[tuple[float, float, float], ...] | None = None
+    """``map0_from_map_i`` for i = 1 ... robots-1, given at ``given_at``."""
     single: bool = False
     """True: robot 0 explores alone; robot 1 stays where it started and its map does not
     count towards coverage (the one-robot baseline; ``t90`` is for the whole floor)."""
@@ -183,6 +190,7 @@ class RunConfig:
             raise ValueError(f"target_coverage must be in (0, 1], got {self.target_coverage}")
         if self.oracle and (self.single or not self.interaction):
             raise ValueError("oracle needs interaction and two robots (not single)")
+        self._check_given()
         if self.slam_mode not in SLAM_MODES:
             raise ValueError(f"slam_mode must be one of {SLAM_MODES}, got {self.slam_mode!r}")
         robots = self.robots
@@ -190,6 +198,23 @@ class RunConfig:
             raise ValueError(f"robots must be an integer from 2 to 8, got {robots!r}")
         if self.name is not None:
             check_run_name(self.name)
+
+    def _check_given(self) -> None:
+        given, transforms = self.given_at, self.given_transforms
+        if (given is None) != (transforms is None):
+            raise ValueError("given_at and given_transforms go together")
+        if given is None or transforms is None:
+            return
+        if not isinstance(given, int) or isinstance(given, bool) or given < 1:
+            raise ValueError(f"given_at must be a step >= 1, got {given!r}")
+        if self.oracle or self.single or not self.interaction:
+            raise ValueError("given transforms need interaction (not oracle, not single)")
+        shape = np.asarray(transforms, dtype=np.float64).shape
+        if shape != (self.robots - 1, 3) or not np.all(np.isfinite(transforms)):
+            raise ValueError(
+                f"given_transforms must be {self.robots - 1} finite (x, y, theta), got "
+                f"{transforms!r}"
+            )
 
 
 MIN_STEPS = 3000
@@ -250,7 +275,7 @@ def build_team(config: RunConfig, env_config: EnvConfig) -> TeamCoordinator:
     env's own config: its robot radius, speeds, control period and peer sensor range)."""
     team_config = TeamConfig.for_env(
         env_config,
-        interaction=config.interaction and not config.single,
+        interaction=config.interaction and not config.single and config.given_at is None,
         keep_merges=config.record,
     )
     factory = None if config.policy is None else load_policy_factory(config.policy)
@@ -406,7 +431,7 @@ def _run_experiment(config: RunConfig) -> dict[str, Any]:
         events: list[str] = []  # the team's decisions, "STEP TEXT"
         last_pending = 0
         keep_on = config.until_merged and config.interaction
-        keep_on = keep_on and not (config.oracle or config.single)
+        keep_on = keep_on and not (config.oracle or config.single or config.given_at)
         steps = 0
         interrupted: str | None = None
         failed: OSError | None = None  # the recording's failure (the module docstring)
@@ -428,6 +453,10 @@ def _run_experiment(config: RunConfig) -> dict[str, Any]:
                 recorder.log_text("team/state", str(team.state))
             with _progress(max_steps, config.progress) as bar:
                 while env.agents and received() is None:
+                    if steps + 1 == config.given_at and config.given_transforms is not None:
+                        # The late oracle: from this step on the team coordinates.
+                        team.config = replace(team.config, interaction=True)
+                        team.start_coordinated(np.array(config.given_transforms), maps)
                     if config.single:
                         actions = [team.act_alone(0, observations[agents[0]], maps(0))]
                         actions += [idle] * (len(agents) - 1)
@@ -599,6 +628,7 @@ def _run_experiment(config: RunConfig) -> dict[str, Any]:
             "interaction": config.interaction,
             "comm": config.comm,
             "oracle": config.oracle,
+            "given_at": config.given_at,
             "single": config.single,
             "robots": len(agents),
             "policy": policy_label(config.policy),

@@ -22,7 +22,9 @@ def test_a_tiny_benchmark_pairs_coordinated_and_independent_runs() -> None:
     assert set(row["collisions"]) == {"team", "independent"}
     table = format_explore_table(rows).splitlines()
     assert table[0].startswith("| scenario | t90 team (s) | t90 independent (s)")
-    assert table[2].startswith("| maze | 12.0 (1✗) | 12.0 (1✗) | - | - | 1.00× | - | 0/1 | 0/1 |")
+    assert table[2].startswith(
+        "| maze | 12.0 (1✗) | 12.0 (1✗) | - | - | - | 1.00× | - | - | +0.0 | - | 0/1 | 0/1 |"
+    )
 
 
 def _run(

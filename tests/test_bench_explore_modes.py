@@ -14,9 +14,11 @@ from agents.team import TeamState
 from mrslam_env.geometry import compose, inverse
 from scenarios import experiment
 from scenarios.bench.explore import (
+    _paired,
     _summarise,
     format_explore_table,
     is_wrong,
+    late_oracle_given,
     oracle_gain_share,
     run_explore_benchmark,
 )
@@ -110,12 +112,84 @@ def test_modes_cannot_be_mixed() -> None:
 
 def test_a_tiny_benchmark_in_a_real_building_runs_every_mode() -> None:
     rows, runs = run_explore_benchmark(["tb3_sandbox"], [0], max_steps=40)
-    assert [r["mode"] for r in runs] == ["team", "independent", "oracle", "single"]
+    modes = ["team", "independent", "oracle", "single", "late-oracle"]
+    assert [r["mode"] for r in runs] == modes
     (row,) = rows
-    assert set(row["t90"]) == {"team", "independent", "oracle", "single"}
+    assert set(row["t90"]) == set(modes)
     assert format_explore_table(rows).splitlines()[2].startswith("| tb3_sandbox |")
     with pytest.raises(ValueError, match="unknown mode"):
         run_explore_benchmark(["tb3_sandbox"], [0], max_steps=40, modes=("solo",))
+    with pytest.raises(ValueError, match="needs the team mode"):
+        run_explore_benchmark(["tb3_sandbox"], [0], max_steps=40, modes=("late-oracle",))
+
+
+def test_the_late_oracle_explores_alone_then_coordinates_with_what_it_is_given(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 40: the late oracle measures what the verification costs: independent robots
+    until the team run's verification step, then the team run's own transform."""
+    states: list[TeamState] = []
+    teams: list[Any] = []
+    build_team = experiment.build_team
+
+    def spy(config: RunConfig, env_config: Any) -> Any:
+        team = build_team(config, env_config)
+        act = team.act
+
+        def recorded_act(observations: Any, maps: Any) -> Any:
+            states.append(team.state)
+            return act(observations, maps)
+
+        team.act = recorded_act  # type: ignore[method-assign]
+        teams.append(team)
+        return team
+
+    monkeypatch.setattr(experiment, "build_team", spy)
+    given = (8.5, 10.0, 3.1)  # any transform: the run takes it as it is
+    report = run_experiment(
+        _config(tmp_path, scenario="office", max_steps=60, given_at=30, given_transforms=(given,))
+    )
+    (team,) = teams
+    # Steps 1-29 independent (not even a merge attempt), 30 on coordinated.
+    assert states[:29] == [TeamState.NO_INTERACTION] * 29
+    assert states[29:] == [TeamState.COORDINATED_EXPLORATION] * 31
+    assert team.hypotheses_tested == 0 and team.first_hypothesis_step is None
+    np.testing.assert_allclose(team.transform, given)
+    assert report["given_at"] == 30 and report["merge"]["robots"]["robot_1"]["joined"]
+
+
+def test_what_the_late_oracle_is_given_comes_from_the_team_run() -> None:
+    merge = {
+        "all_joined": True,
+        "step_all_joined": 135,
+        "robots": {"robot_1": {"transform": {"x": 8.5, "y": 10.0, "theta": 3.14}}},
+    }
+    assert late_oracle_given({"merge": merge}) == (135, ((8.5, 10.0, 3.14),))
+    assert late_oracle_given({"merge": {**merge, "all_joined": False}}) is None
+
+
+def test_paired_differences_have_a_students_t_interval() -> None:
+    def run(seed: int, t90: float) -> dict[str, Any]:
+        return {"scenario": "s", "seed": seed, "policy": "p", "robots": 2, "t90_or_limit": t90}
+
+    solo = [run(0, 50.0), run(1, 60.0), run(2, 70.0)]
+    team = [run(0, 48.0), run(1, 56.0), run(2, 64.0), run(3, 10.0)]  # seed 3 has no pair
+    paired = _paired(solo, team)
+    # Differences 2, 4, 6: mean 4, standard error 2 / sqrt(3), t(0.975, 2) = 4.303.
+    assert paired == {"mean": 4.0, "ci95": round(4.303 * 2 / 3**0.5, 1), "n": 3}
+    assert _paired(solo, [run(1, 61.0)]) == {"mean": -1.0, "ci95": None, "n": 1}
+    assert _paired(solo, []) is None
+
+
+def test_given_transforms_are_checked() -> None:
+    with pytest.raises(ValueError, match="go together"):
+        RunConfig(given_at=10)
+    with pytest.raises(ValueError, match="given_at must be a step"):
+        RunConfig(given_at=0, given_transforms=((0.0, 0.0, 0.0),))
+    with pytest.raises(ValueError, match="1 finite"):
+        RunConfig(given_at=5, given_transforms=((0.0, float("nan"), 0.0),))
+    with pytest.raises(ValueError, match="need interaction"):
+        RunConfig(given_at=5, given_transforms=((0.0, 0.0, 0.0),), oracle=True)
 
 
 def _run(mode: str, t90: float, seed: int = 0, scenario: str = "s") -> dict[str, Any]:
@@ -155,7 +229,7 @@ def test_share_of_the_oracle_gain() -> None:
     assert row["speedup"] == pytest.approx(100.0 / 75.0, abs=1e-3)
     assert row["runs"] == 2 and row["verified"] == 2  # oracle runs are not merges
     line = format_explore_table([row]).splitlines()[2]
-    assert line.startswith("| s | 75.0 | 100.0 | 55.0 | 160.0 | 1.33× | 56% |")
+    assert line.startswith("| s | 75.0 | 100.0 | 55.0 | - | 160.0 | 1.33× | 56% | - | +25.0")
 
 
 def test_wrong_means_off_by_more_than_ten_centimetres_or_one_degree() -> None:

@@ -76,6 +76,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from mrslam_env.atomic import write_text_atomic
 from mrslam_env.config import EnvConfig
@@ -95,7 +96,7 @@ __all__ = [
 ]
 
 DEFAULT_SCENARIOS = ("office", "warehouse", "maze", "twin_wings", "procedural-0")
-MODES = ("team", "independent", "oracle", "single")
+MODES = ("team", "independent", "oracle", "single", "late-oracle")
 WRONG_TRANSLATION = 0.10
 """A verified merge further off than this (m) is wrong."""
 WRONG_ROTATION_DEG = 1.0
@@ -116,14 +117,34 @@ def oracle_gain_share(t_independent: float, t_team: float, t_oracle: float) -> f
     return (t_independent - t_team) / gain
 
 
-def _mode_config(mode: str) -> dict[str, bool]:
+Given = tuple[int, tuple[tuple[float, float, float], ...]]
+"""What a late-oracle run is given: (step, ``map0_from_map_i`` for i = 1 ... n-1)."""
+
+
+def _mode_config(mode: str, given: Given | None = None) -> dict[str, bool]:
     if mode not in MODES:
         raise ValueError(f"unknown mode {mode!r}; modes: {', '.join(MODES)}")
     return {
-        "interaction": mode in ("team", "oracle"),
+        "interaction": mode in ("team", "oracle") or given is not None,
         "oracle": mode == "oracle",
         "single": mode == "single",
     }
+
+
+def late_oracle_given(team_report: dict[str, Any]) -> Given | None:
+    """What the late oracle of a team run is given: the step at which the team run had
+    joined every robot into robot 0's frame and its final transforms; None when it never
+    did (the late oracle is then an independent run)."""
+    merge = upgrade_report(team_report)["merge"]
+    step = merge.get("step_all_joined")
+    robots = merge.get("robots") or {}
+    if not merge.get("all_joined") or step is None or not robots:
+        return None
+    transforms = []
+    for k in range(1, len(robots) + 1):
+        t = robots[f"robot_{k}"]["transform"]
+        transforms.append((float(t["x"]), float(t["y"]), float(t["theta"])))
+    return int(step), tuple(transforms)
 
 
 def _run(
@@ -134,8 +155,9 @@ def _run(
     policy: str | None,
     robots: int,
     out: Path,
+    given: Given | None = None,
 ) -> dict[str, Any]:
-    flags = _mode_config(mode)
+    flags = _mode_config(mode, given)
     config = RunConfig(
         scenario=scenario,
         seed=seed,
@@ -150,22 +172,24 @@ def _run(
         interaction=flags["interaction"],
         oracle=flags["oracle"],
         single=flags["single"],
+        given_at=None if given is None else given[0],
+        given_transforms=None if given is None else given[1],
     )
     return run_experiment(config)
 
 
-Task = tuple[int, str, int, int, str | None, int, str]
+Task = tuple[int, str, int, int, str | None, int, str, Given | None]
 """One run: (index in the sweep, scenario, seed, max_steps, policy spec or None, robots,
-mode)."""
+mode, what a late oracle is given)."""
 
 
 def _task(task: Task) -> dict[str, Any]:
     """One run's report (the JSON of ``mrslam run``) with the task under ``"bench"``. The
     run writes into a folder of its own, deleted after: a Ray worker may be on another
     machine, so the report travels back as the result and the caller keeps it."""
-    index, scenario, seed, max_steps, policy, robots, mode = task
+    index, scenario, seed, max_steps, policy, robots, mode, given = task
     with tempfile.TemporaryDirectory(prefix="mrslam-bench-explore-") as folder:
-        report = _run(scenario, seed, max_steps, mode, policy, robots, Path(folder))
+        report = _run(scenario, seed, max_steps, mode, policy, robots, Path(folder), given)
     report["outputs"] = {}  # the files went with the folder
     report["bench"] = {
         "index": index,
@@ -175,6 +199,7 @@ def _task(task: Task) -> dict[str, Any]:
         "mode": mode,
         "policy_spec": policy,
         "robots": robots,
+        "given_at": None if given is None else given[0],
     }
     return report
 
@@ -232,6 +257,7 @@ def run_row(report: dict[str, Any]) -> dict[str, Any]:
         "steps_after_coverage": report.get("steps_after_coverage", 0),
         "coverage": report["coverage"]["merged"],
         "steps": report["steps"],
+        "given_at": bench.get("given_at"),
         "collision_steps": sum(collisions[agent] for agent in moving),
         "robot_steps": report["steps"] * len(moving),
         "wall_time": report["wall_time_s"],
@@ -287,15 +313,23 @@ def run_explore_benchmark(
     if out is not None:
         check_out_folder(out)
         (out / "reports").mkdir(parents=True, exist_ok=True)
+    late = "late-oracle" in modes
+    if late and "team" not in modes:
+        raise ValueError("the late-oracle mode needs the team mode (it is given its transforms)")
+    runs_of = [
+        (scenario, seed, spec, size)
+        for scenario in scenarios
+        for size in robots
+        for seed in seeds
+        for spec in policies
+    ]
+    first = [mode for mode in modes if mode != "late-oracle"]
     tasks: list[Task] = [
         (index, *run)
         for index, run in enumerate(
-            (scenario, seed, max_steps, spec, size, mode)
-            for scenario in scenarios
-            for size in robots
-            for seed in seeds
-            for spec in policies
-            for mode in modes
+            (scenario, seed, max_steps, spec, size, mode, None)
+            for scenario, seed, spec, size in runs_of
+            for mode in first
         )
     ]
 
@@ -310,6 +344,18 @@ def run_explore_benchmark(
             progress(f"{row['scenario']} seed {row['seed']} {row['mode']}{label}: t90 {row['t90']}")
 
     reports = run_tasks(_task, tasks, jobs=jobs, ray=ray, on_result=arrived)
+    if late:  # then each team run's late oracle, given what that team run found
+        team = {
+            (b["scenario"], b["seed"], b["policy_spec"], b["robots"]): report
+            for report in reports
+            if (b := report["bench"])["mode"] == "team"
+        }
+        given = [
+            (len(reports) + index, scenario, seed, max_steps, spec, size, "late-oracle", found)
+            for index, (scenario, seed, spec, size) in enumerate(runs_of)
+            for found in [late_oracle_given(team[(scenario, seed, spec, size)])]
+        ]
+        reports += run_tasks(_task, given, jobs=jobs, ray=ray, on_result=arrived)
     runs = [run_row(report) for report in reports]
     rows = _summary_rows(runs)
     if out is not None:
@@ -435,6 +481,10 @@ def _summarise(
     share = None
     if t_team is not None and t_solo is not None and t_oracle is not None:
         share = oracle_gain_share(t_solo, t_team, t_oracle)
+    t_late = t90.get("late-oracle")
+    late_share = None
+    if t_late is not None and t_solo is not None and t_oracle is not None:
+        late_share = oracle_gain_share(t_solo, t_late, t_oracle)
     collisions: dict[str, dict[str, float]] = {}
     for mode, chosen in by_mode.items():
         if not chosen:
@@ -459,6 +509,10 @@ def _summarise(
         "t90_independent": t_solo,
         "speedup": round(t_solo / t_team, 3) if t_team and t_solo is not None else None,
         "oracle_gain_share": None if share is None else round(share, 3),
+        "late_oracle_gain_share": None if late_share is None else round(late_share, 3),
+        "gain_over_independent": {
+            mode: _paired(solo, by_mode[mode]) for mode in ("team", "late-oracle", "oracle")
+        },
         "unfinished": {
             mode: sum(r["t90"] is None for r in chosen)
             for mode, chosen in by_mode.items()
@@ -487,6 +541,40 @@ def _summarise(
     }
 
 
+def _paired(
+    baseline: Sequence[dict[str, Any]], runs: Sequence[dict[str, Any]]
+) -> dict[str, float | int | None] | None:
+    """``baseline`` t90 minus ``runs`` t90 over the runs of the same scenario, seed, policy
+    and team size (s; at the time limit for a run that never got there): the mean, the
+    half-width of its 95 % confidence interval (Student's t; None for fewer than two
+    pairs) and the number of pairs; None without a pair."""
+    times = {
+        (r["scenario"], r["seed"], r.get("policy"), r.get("robots")): r["t90_or_limit"]
+        for r in baseline
+    }
+    differences = [
+        times[key] - r["t90_or_limit"]
+        for r in runs
+        if (key := (r["scenario"], r["seed"], r.get("policy"), r.get("robots"))) in times
+    ]
+    if not differences:
+        return None
+    n = len(differences)
+    half = None
+    if n > 1:
+        spread = statistics.stdev(differences) / math.sqrt(n)
+        half = round(float(stats.t.ppf(0.975, n - 1)) * spread, 1)
+    return {"mean": round(statistics.fmean(differences), 1), "ci95": half, "n": n}
+
+
+def _gain_text(row: dict[str, Any], mode: str) -> str:
+    paired = row.get("gain_over_independent", {}).get(mode)
+    if paired is None:
+        return "-"
+    half = paired["ci95"]
+    return f"{paired['mean']:+.1f}" + ("" if half is None else f" ± {half:.1f}")
+
+
 def _time(row: dict[str, Any], mode: str) -> str:
     value = row["t90"].get(mode)
     if value is None:
@@ -505,8 +593,10 @@ def format_explore_table(rows: Sequence[dict[str, Any]]) -> str:
         "| scenario | "
         + ("policy | " if by_policy else "")
         + ("robots | joined | " if by_size else "")
-        + "t90 team (s) | t90 independent (s) | t90 oracle (s) | t90 single (s) | "
-        "speed-up indep/team | share of oracle gain | faster | verified | wrong accepted | "
+        + "t90 team (s) | t90 independent (s) | t90 oracle (s) | t90 late oracle (s) | "
+        "t90 single (s) | speed-up indep/team | share of oracle gain | "
+        "late oracle's share | indep − team (s, paired, 95 % CI) | "
+        "indep − late oracle (s, paired) | faster | verified | wrong accepted | "
         "error m med / p90 / max | error ° med / p90 / max | "
         "collision steps team med / max (% steps) | hypotheses tested | "
         "verified before t90 | contact seeking (robot-steps) | rendezvous (robot-steps) | "
@@ -515,7 +605,7 @@ def format_explore_table(rows: Sequence[dict[str, Any]]) -> str:
         + ("--- | " if by_policy else "")
         + ("---: | ---: | " if by_size else "")
         + "---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
-        "| ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for row in rows:
         rendezvous = row.get("rendezvous_steps")
@@ -524,8 +614,10 @@ def format_explore_table(rows: Sequence[dict[str, Any]]) -> str:
         t_error = "-" if translation is None else " / ".join(f"{v:.3f}" for v in translation)
         r_error = "-" if rotation is None else " / ".join(f"{v:.2f}" for v in rotation)
         speedup = "-" if row["speedup"] is None else f"{row['speedup']:.2f}×"
-        share = row["oracle_gain_share"]
-        share_text = "-" if share is None else f"{share:.0%}"
+        share_text = " | ".join(
+            "-" if value is None else f"{value:.0%}"
+            for value in (row["oracle_gain_share"], row.get("late_oracle_gain_share"))
+        )
         team_collisions = row["collisions"].get("team")
         if team_collisions is None:
             collisions = "-"
@@ -539,7 +631,9 @@ def format_explore_table(rows: Sequence[dict[str, Any]]) -> str:
             policy += f" {row['robots']} | {row['joined']}/{row['joinable']} |"
         lines.append(
             f"| {row['scenario']} |{policy} {_time(row, 'team')} | {_time(row, 'independent')} | "
-            f"{_time(row, 'oracle')} | {_time(row, 'single')} | {speedup} | {share_text} | "
+            f"{_time(row, 'oracle')} | {_time(row, 'late-oracle')} | {_time(row, 'single')} | "
+            f"{speedup} | {share_text} | {_gain_text(row, 'team')} | "
+            f"{_gain_text(row, 'late-oracle')} | "
             f"{row['faster']}/{row['runs']} | {row['verified']}/{row['runs']} | "
             f"{row['wrong_accepted']} | {t_error} | {r_error} | {collisions} | "
             f"{row['hypotheses_tested']} | {row.get('verified_before_t90', 0)}/{row['runs']} | "
