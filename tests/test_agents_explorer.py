@@ -301,7 +301,7 @@ def test_the_cut_short_search_plans_as_the_whole_search(
 ) -> None:
     # The explorer stops its search once no frontier left can beat the best one reached;
     # with the whole search instead, the same office run makes the same plans and actions.
-    import agents.explorer as explorer_module
+    import agents.explorer_choice as choice_module
     from agents.planning import CostGrid, distance_field
     from mrslam_env.config import EnvConfig
     from mrslam_env.env import MultiRobotSlamEnv
@@ -326,7 +326,7 @@ def test_the_cut_short_search_plans_as_the_whole_search(
     def whole_search(grid: CostGrid, start: tuple[int, int], *_: object, **__: object) -> object:
         return distance_field(grid, grid.cell_to_world(np.array(start)), snap_distance=1e-9)
 
-    monkeypatch.setattr(explorer_module, "best_goal_field", whole_search)
+    monkeypatch.setattr(choice_module, "best_goal_field", whole_search)
     whole_actions, whole_plans = run()
     np.testing.assert_array_equal(np.array(cut_actions), np.array(whole_actions))
     for cut, whole in zip(cut_plans, whole_plans, strict=True):
