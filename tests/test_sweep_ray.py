@@ -165,7 +165,7 @@ def test_the_cli_exits_1_with_the_workers_error_when_a_run_fails(
     assert main([*argv, "--max-steps", "5"]) == 1
     error = capsys.readouterr().err
     assert "task 1 of 1" in error
-    assert "ValueError: (0, 'office', 0, 5, None, 2, 'team') does not appear to be" in error
+    assert "ValueError: (0, 'office', 0, 5, None, 2, 'team', None) does not appear to be" in error
 
 
 # --- a real cluster: ray start --head with a token, joined by address or RAY_ADDRESS --------

@@ -142,7 +142,7 @@ class PairGenerationConfig:
         slam = asdict(SlamConfig())
         # The pairs are mapped in mode "slam": the pose graph's settings are not theirs
         # (and leaving them out keeps the keys of the sets made before it existed).
-        del slam["pose_graph"]
+        slam.pop("pose_graph", None)
         fields = asdict(self)
         if not self.maps:  # keeps the keys of the sets made before map files were possible
             del fields["maps"]
