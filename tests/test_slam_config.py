@@ -15,7 +15,7 @@ def test_defaults_are_valid_and_frozen() -> None:
     config = SlamConfig()
     assert config.mode == "slam"
     assert config.grid.resolution == 0.05
-    assert set(SLAM_MODES) == {"slam", "odometry", "ground_truth"}
+    assert set(SLAM_MODES) == {"slam", "pose_graph", "odometry", "ground_truth"}
     with pytest.raises(dataclasses.FrozenInstanceError):
         config.mode = "odometry"  # type: ignore[misc]
     with pytest.raises(TypeError):

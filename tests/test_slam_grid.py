@@ -14,6 +14,7 @@ from itertools import pairwise
 
 import numpy as np
 import pytest
+from slam_worlds import room_walls
 
 from mrslam_env.evaluation import map_agreement
 from mrslam_env.geometry import compose, inverse
@@ -45,15 +46,7 @@ NO_DISCS = np.zeros((0, 3))
 
 def box_room(width: float = 6.0, height: float = 4.0) -> WorldSpec:
     """A closed room with 0.1 m walls and two pieces of furniture."""
-    t = 0.1
-    walls = [
-        box(-t, -t, width + t, 0.0),
-        box(-t, height, width + t, height + t),
-        box(-t, -t, 0.0, height + t),
-        box(width, -t, width + t, height + t),
-        box(1.0, 1.0, 1.6, 1.4),
-        box(4.2, 2.5, 4.6, 3.3),
-    ]
+    walls = [*room_walls(width, height), box(1.0, 1.0, 1.6, 1.4), box(4.2, 2.5, 4.6, 3.3)]
     return WorldSpec.from_walls("box", walls, [[3.0, 2.0, 0.0]])
 
 

@@ -573,9 +573,19 @@ class OccupancyGrid:
         Keep the likelihood fields (:attr:`fine_fields`, :attr:`coarse_field`) current;
         False leaves them zero (a map nothing is matched against), which saves about a third
         of :meth:`integrate_scan`'s time. Everything else is the same either way.
+    around : (float, float)
+        Frame point ``(x, y)`` the first chunk is centred on (to the nearest cell corner):
+        a grid for scans far from the frame's origin then does not grow to cover it. The
+        cells are those of any grid of the frame at the same resolution.
     """
 
-    def __init__(self, config: GridConfig | None = None, *, fields: bool = True) -> None:
+    def __init__(
+        self,
+        config: GridConfig | None = None,
+        *,
+        fields: bool = True,
+        around: tuple[float, float] = (0.0, 0.0),
+    ) -> None:
         self.config = config if config is not None else GridConfig()
         self.resolution = self.config.resolution
         self.fine_kernels, fine_sum = gaussian_kernels(self.config.fine_sigma, self.resolution)
@@ -603,7 +613,10 @@ class OccupancyGrid:
         by :meth:`integrate_scan`; times ``resolution**2``, the mapped area."""
         chunk = self.config.growth_chunk
         # Cell index (iy, ix) of the origin on the lattice through the frame's (0, 0).
-        self._origin_index = (-chunk // 2, -chunk // 2)
+        self._origin_index = (
+            round(around[1] / self.resolution) - chunk // 2,
+            round(around[0] / self.resolution) - chunk // 2,
+        )
         shape = (chunk, chunk)
         self._log_odds = np.zeros(shape, dtype=np.float32)
         self._surface_odds = np.zeros(shape, dtype=np.float32)
@@ -707,6 +720,26 @@ class OccupancyGrid:
         if self._n_written > len(self._written):
             return None
         return self._read_only(self._written[: self._n_written])
+
+    def copy(self, *, fields: bool) -> OccupancyGrid:
+        """An independent copy; ``fields=False`` gives a grid that keeps no likelihood
+        fields from now on (as one built with ``fields=False``: its fields are zero)."""
+        new = OccupancyGrid.__new__(OccupancyGrid)
+        for name, value in vars(self).items():
+            setattr(new, name, value.copy() if isinstance(value, np.ndarray) else value)
+        if not fields:
+            new._stamped = (
+                np.zeros((len(self.fine_kernels), 0, 0), dtype=np.float32),
+                np.zeros((len(self.coarse_kernels), 0, 0), dtype=np.float32),
+            )
+            new._fine_fields = np.zeros_like(self._fine_fields)
+            new._coarse_field = np.zeros_like(self._coarse_field)
+        return new
+
+    def forget_written(self) -> None:
+        """Make :attr:`last_written` None (any cell may have changed) until the next
+        :meth:`integrate_scan`: for a grid rebuilt from its scans."""
+        self._n_written = len(self._written) + 1
 
     def to_gridmap(self) -> GridMap:
         """The trinary view: OCCUPIED above ``occupied_threshold``, FREE below

@@ -55,6 +55,7 @@ __all__ = [
     "prior_information",
     "refine_pose",
     "search_window",
+    "snap_points",
     "translational_condition",
 ]
 
@@ -85,6 +86,41 @@ def point_sectors(points: FloatArray, normals: FloatArray, heading: float) -> In
 
 
 # --- the search ------------------------------------------------------------------------------
+
+
+@numba.njit(cache=True)
+def snap_points(
+    points: FloatArray,
+    stride: int,
+    n: int,
+    x0: float,
+    y0: float,
+    theta: float,
+    origin_x: float,
+    origin_y: float,
+    resolution: float,
+    reach: int,
+    rows: int,
+    cols: int,
+    kept: IntArray,
+    cells: IntArray,
+) -> int:
+    """Snap the first ``n`` of every ``stride``-th point (sensor frame) at pose ``(x0, y0,
+    theta)`` to grid cells, keeping those at least ``reach`` cells inside the grid (a
+    point whose translation window leaves the grid could only meet its empty margin):
+    point ``kept[u]`` lies ``reach`` cells up and right of flat cell ``cells[u]``
+    (``row * cols + col``). Returns how many were kept."""
+    c, s = math.cos(theta), math.sin(theta)
+    used = 0
+    for m in range(n):
+        px, py = points[m * stride, 0], points[m * stride, 1]
+        ix = math.floor((x0 + c * px - s * py - origin_x) / resolution)
+        iy = math.floor((y0 + s * px + c * py - origin_y) / resolution)
+        if reach <= ix < cols - reach and reach <= iy < rows - reach:
+            kept[used] = m
+            cells[used] = (iy - reach) * cols + ix - reach
+            used += 1
+    return used
 
 
 @numba.njit(cache=True)
@@ -142,20 +178,15 @@ def correlative_search(
         return best_x, best_y, best_theta, best_score
     inv_n = 1.0 / n
     row_step = xy_step_cells * cols
+    kept = np.empty(n, dtype=np.int64)
     for k in range(-k_max, k_max + 1):
         theta = theta0 + k * angle_step
-        c, s = math.cos(theta), math.sin(theta)
-        # Snap the rotated points to cells; a point whose translation window leaves the
-        # grid is left out (it could only meet the grid's empty margin).
-        used = 0
-        for m in range(n):
-            px, py = points[m * stride, 0], points[m * stride, 1]
-            ix = math.floor((x0 + c * px - s * py - origin_x) / resolution)
-            iy = math.floor((y0 + s * px + c * py - origin_y) / resolution)
-            if reach <= ix < cols - reach and reach <= iy < rows - reach:
-                sector = sectors[m * stride]
-                base[used] = (sector * rows + iy - reach) * cols + ix - reach
-                used += 1
+        used = snap_points(
+            points, stride, n, x0, y0, theta, origin_x, origin_y, resolution, reach,
+            rows, cols, kept, base,
+        )  # fmt: skip
+        for m in range(used):
+            base[m] += sectors[kept[m] * stride] * rows * cols
         sums[:] = 0.0
         for m in range(used):
             corner = base[m]

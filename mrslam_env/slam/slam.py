@@ -31,6 +31,18 @@ Per update (``mode="slam"``):
    matched scan is integrated: sparser updates cut the heading random walk in SLAM-only
    runs but measured worse end to end, see :class:`~mrslam_env.slam.config.SlamConfig`).
 
+``mode="pose_graph"`` runs the same front end and hands every integrated scan to a
+:class:`~mrslam_env.slam.backend.LocalChain` (the scan matched against a local map of the
+newest scans only, for the graph's odometry where the front end may have pulled itself
+onto an old map) and a :class:`~mrslam_env.slam.backend.PoseGraphBackend` (keyframes,
+pose graph, loop closures). When an optimisation after a loop closure moves some node more
+than the redraw tolerance from where its scans are drawn, both maps are redrawn from all
+the scans at their optimised poses (the matched map without the scans still waiting for
+it), and the front end's poses (the robot's pose, ``map_from_odom``) move with the newest
+node; below the tolerance the maps and the poses stay as they were.
+:attr:`RobotSlam.trajectory` keeps the poses as they were returned;
+:attr:`RobotSlam.optimized_trajectory` gives every step's pose through the optimised graph.
+
 ``mode="odometry"`` skips step 3 (the pose is the odometry itself) and
 ``mode="ground_truth"`` replaces steps 1–3 by the true pose (in the map frame) passed in.
 """
@@ -43,7 +55,8 @@ from collections import deque
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mrslam_env.geometry import wrap_scalar
+from mrslam_env.geometry import compose, wrap_scalar
+from mrslam_env.slam.backend import LocalChain, PoseGraphBackend, normals_of
 from mrslam_env.slam.config import SlamConfig
 from mrslam_env.slam.grid import OccupancyGrid
 from mrslam_env.slam.matcher import MatchResult, match_scan
@@ -105,7 +118,8 @@ class RobotSlam:
         self.config = config if config is not None else SlamConfig()
         self.n_beams = n_beams
         self.max_range = float(max_range)
-        lag = self.config.match_lag if self.config.mode == "slam" else 0
+        matching = self.config.mode in ("slam", "pose_graph")
+        lag = self.config.match_lag if matching else 0
         # With a lag, the map is never matched against: it needs no likelihood fields.
         self.grid = OccupancyGrid(self.config.grid, fields=lag == 0)
         self._matched_grid = OccupancyGrid(self.config.grid) if lag > 0 else self.grid
@@ -127,6 +141,17 @@ class RobotSlam:
         self.n_rejected = 0
         """Matches rejected so far (the pose fell back to odometry)."""
         self._rejected_in_a_row = 0
+        self.backend: PoseGraphBackend | None = None
+        """The pose graph and its loop closures (``pose_graph`` mode), else None."""
+        self._chain: LocalChain | None = None
+        if self.config.mode == "pose_graph":
+            self.backend = PoseGraphBackend(self.config, self.max_range)
+            self._chain = LocalChain(self.config, self.max_range)
+        # Per step (pose_graph mode): the newest node then, and the pose relative to it.
+        self._step_nodes = np.zeros(256, dtype=np.int64)
+        self._step_offsets = np.zeros((256, 3))
+        self.n_rerenders = 0
+        """Times the maps were redrawn from the optimised graph (``pose_graph`` mode)."""
 
     # --- state --------------------------------------------------------------------------
 
@@ -139,6 +164,17 @@ class RobotSlam:
     def trajectory(self) -> FloatArray:
         """Every pose returned by :meth:`update` so far, (T, 3), map frame."""
         return self._trajectory[: self._length].copy()
+
+    @property
+    def optimized_trajectory(self) -> FloatArray:
+        """Every step's pose (T, 3) through the current pose graph: the pose relative to
+        the newest node at that step, composed with that node's optimised pose (in modes
+        other than ``pose_graph``, :attr:`trajectory`)."""
+        if self.backend is None:
+            return self.trajectory
+        nodes = self._step_nodes[: self._length]
+        offsets = self._step_offsets[: self._length]
+        return compose(self.backend.graph.poses[nodes], offsets)
 
     @property
     def map_from_odom(self) -> FloatArray:
@@ -191,8 +227,7 @@ class RobotSlam:
         if self._reference_pose is None:
             # The map frame is the start pose.
             pose = truth if truth is not None else (0.0, 0.0, 0.0)
-            self._integrate(pose, odom, scan)
-            return self._record(pose)
+            return self._record(self._integrate(pose, odom, scan))
 
         reference = self._reference_pose
         motion = _relative(self._reference_odom, odom)
@@ -205,7 +240,8 @@ class RobotSlam:
             return self._record(predicted)
         pose = predicted
         normals = scan_normals(scan, self.max_range, self.config.grid.min_range)
-        if mode == "slam":
+        result: MatchResult | None = None
+        if mode in ("slam", "pose_graph"):
             result = match_scan(
                 self._matched_grid,
                 scan,
@@ -238,8 +274,7 @@ class RobotSlam:
                 self._reference_pose = pose
                 self._reference_odom = odom
                 return self._record(pose)
-        self._integrate(pose, odom, scan, normals)
-        return self._record(pose)
+        return self._record(self._integrate(pose, odom, scan, normals, result))
 
     def _integrate(
         self,
@@ -247,7 +282,10 @@ class RobotSlam:
         odom: tuple[float, float, float],
         scan: FloatArray,
         normals: FloatArray | None = None,
-    ) -> None:
+        match: MatchResult | None = None,
+    ) -> tuple[float, float, float]:
+        """Integrate the scan at ``pose``; returns the pose, moved with the maps if a loop
+        closure had them redrawn (``pose_graph`` mode)."""
         self.grid.integrate_scan(pose, scan, self.max_range, normals)
         if self._matched_grid is not self.grid:
             # Copies: the caller may reuse its scan buffer.
@@ -257,6 +295,51 @@ class RobotSlam:
         self._reference_pose = pose
         self._reference_odom = odom
         self.n_integrated += 1
+        if self.backend is not None:
+            assert self._chain is not None
+            local, local_match = self._chain.add(pose, scan, normals, self.backend.in_snap_window)
+            self.backend.add_scan(pose, local, scan, match, local_match)
+            if self.backend.needs_rerender():
+                self._rerender()
+                assert self._reference_pose is not None
+                return self._reference_pose
+        return pose
+
+    def _rerender(self) -> None:
+        """Redraw both maps from every scan at its optimised pose (the matched map without
+        the scans still waiting for it); the front end's poses move with the newest node."""
+        assert self.backend is not None
+        correction = self.backend.correction()
+        poses = self.backend.scan_poses()
+        scans = self.backend.scans
+        held = len(self._waiting)
+        reach = self.max_range
+        matched = OccupancyGrid(self.config.grid)
+        matched.ensure_contains(
+            float(poses[:, 0].min() - reach),
+            float(poses[:, 1].min() - reach),
+            float(poses[:, 0].max() + reach),
+            float(poses[:, 1].max() + reach),
+        )
+        min_range = self.config.grid.min_range
+        normals = [normals_of(scan, reach, min_range) for scan in scans]
+        for k in range(len(scans) - held):
+            matched.integrate_scan(poses[k], scans[k], reach, normals[k])
+        if self._matched_grid is self.grid:
+            self.grid = self._matched_grid = matched
+        else:
+            grid = matched.copy(fields=False)
+            self._waiting = deque()
+            for k in range(len(scans) - held, len(scans)):
+                pose = (float(poses[k, 0]), float(poses[k, 1]), float(poses[k, 2]))
+                grid.integrate_scan(pose, scans[k], reach, normals[k])
+                self._waiting.append((pose, scans[k], normals[k]))
+            self.grid, self._matched_grid = grid, matched
+        self.grid.forget_written()
+        assert self._reference_pose is not None
+        self._reference_pose = _compose(correction, self._reference_pose)
+        self._mapped_pose = _compose(correction, self._mapped_pose)
+        self.n_rerenders += 1
 
     def _catch_up(self, lag: int) -> None:
         """Integrate into the matched map the waiting scans but the last ``lag``."""
@@ -265,6 +348,13 @@ class RobotSlam:
             self._matched_grid.integrate_scan(pose, scan, self.max_range, normals)
 
     def _record(self, pose: tuple[float, float, float]) -> FloatArray:
+        if self.backend is not None:
+            if self._length == len(self._step_nodes):
+                self._step_nodes = np.concatenate([self._step_nodes, self._step_nodes])
+                self._step_offsets = np.concatenate([self._step_offsets, self._step_offsets])
+            node = self.backend.last_node
+            self._step_nodes[self._length] = node
+            self._step_offsets[self._length] = _relative(self.backend.drawn_pose(node), pose)
         self._pose = pose
         if self._length == len(self._trajectory):
             self._trajectory = np.concatenate([self._trajectory, np.zeros_like(self._trajectory)])
