@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -11,6 +12,13 @@ from mrslam_env.mapio import save_map
 from mrslam_env.registry import build_world
 from mrslam_env.sim.world import ground_truth_map
 from scenarios import interrupts
+
+# A test run started in the background of a script (``pytest &``) inherits SIGINT ignored,
+# and every command a test starts inherits that: an ignored signal stays ignored
+# (scenarios/interrupts.py), so the tests of Ctrl-C would see no Ctrl-C. The tests are of
+# a terminal's Ctrl-C: the commands they start get SIGINT as a terminal would.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture(autouse=True)
