@@ -299,6 +299,10 @@ def test_short_scenario_run_slam_is_much_better_than_odometry() -> None:
     assert row["ratio"] < 1.0 / 3.0
     assert row["map_agreement"] >= 0.97
     assert row["steps_per_s"] > 0 and row["update_ms"] > 0
+    # The pose graph replays the same data beside the scan matcher, no worse on it.
+    assert row["ate_pose_graph"] < row["ate_slam"] + 0.005
+    assert row["map_agreement_pose_graph"] >= 0.97
+    assert len(row["loop_closures_per_robot"]) == 2
     assert "office" in format_slam_table([row])
 
 

@@ -154,15 +154,19 @@ def _benchmark_scenario(
     update_seconds: list[float] = []
     raster = ground_truth_map(world, slam_config.grid.resolution, margin=1.0)
     ate_slam, ate_odometry, agreement, rejected = [], [], [], []
+    ate_graph, ate_graph_optimised, agreement_graph, closures = [], [], [], []
+    graph_config = replace(slam_config, mode="pose_graph")
     for agent in agents:
         timed = RobotSlam(slam_config, lidar.n_beams, lidar.max_range)
         dead_reckoning = RobotSlam(odometry_config, lidar.n_beams, lidar.max_range)
+        graph = RobotSlam(graph_config, lidar.n_beams, lidar.max_range)
         for k, (odom, scan) in enumerate(recorded[agent]):
             before = time.perf_counter()
             timed.update(odom, scan)
             if k > 0:
                 update_seconds.append(time.perf_counter() - before)
             dead_reckoning.update(odom, scan)
+            graph.update(odom, scan)
         slam = env.robot_slam(agent)
         true_poses = np.array(truth[agent])
         world_from_map = true_poses[0]
@@ -172,6 +176,12 @@ def _benchmark_scenario(
         )
         agreement.append(map_agreement(env.robot_map(agent), world_from_map, raster))
         rejected.append(slam.n_rejected)
+        ate_graph.append(absolute_trajectory_error(graph.trajectory, true_poses, world_from_map))
+        ate_graph_optimised.append(
+            absolute_trajectory_error(graph.optimized_trajectory, true_poses, world_from_map)
+        )
+        agreement_graph.append(map_agreement(graph.grid.to_gridmap(), world_from_map, raster))
+        closures.append(0 if graph.backend is None else graph.backend.n_closures)
     mean_slam, mean_odometry = float(np.mean(ate_slam)), float(np.mean(ate_odometry))
     return {
         "scenario": name,
@@ -188,6 +198,11 @@ def _benchmark_scenario(
         "ate_odometry_per_robot": ate_odometry,
         "map_agreement_per_robot": agreement,
         "rejected_matches": rejected,
+        "ate_pose_graph": float(np.mean(ate_graph)),
+        "ate_pose_graph_optimised": float(np.mean(ate_graph_optimised)),
+        "map_agreement_pose_graph": float(np.mean(agreement_graph)),
+        "ate_pose_graph_per_robot": ate_graph,
+        "loop_closures_per_robot": closures,
     }
 
 
@@ -196,6 +211,7 @@ def format_slam_table(rows: Sequence[dict[str, Any]]) -> str:
     header = (
         f"{'scenario':<22}{'ATE slam m':>11}{'ATE odom m':>11}{'ratio':>7}"
         f"{'agreement':>10}{'update ms':>10}{'mean ms':>9}{'steps/s':>9}"
+        f"{'ATE graph m':>12}{'optimised':>10}{'agreement':>10}{'closures':>9}"
     )
     lines = [header, "-" * len(header)]
     for row in rows:
@@ -203,6 +219,8 @@ def format_slam_table(rows: Sequence[dict[str, Any]]) -> str:
             f"{row['scenario']:<22}{row['ate_slam']:>11.3f}{row['ate_odometry']:>11.3f}"
             f"{row['ratio']:>7.3f}{row['map_agreement']:>10.4f}{row['update_ms']:>10.3f}"
             f"{row['update_mean_ms']:>9.3f}{row['steps_per_s']:>9.0f}"
+            f"{row['ate_pose_graph']:>12.3f}{row['ate_pose_graph_optimised']:>10.3f}"
+            f"{row['map_agreement_pose_graph']:>10.4f}{sum(row['loop_closures_per_robot']):>9d}"
         )
     return "\n".join(lines)
 
