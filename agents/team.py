@@ -90,6 +90,7 @@ place, a wait or a drive, ``_verifying``); every step after,
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -467,7 +468,9 @@ class TeamCoordinator:
         or with more robots (N-1, 3), ``map0_from_map_i`` for i = 1 ... N-1.
 
         What follows is the coordination that follows a verified merge; the robots'
-        current maps count as exchanged (at the start, one scan each).
+        current maps count as exchanged (at the start, one scan each). A team made
+        without interaction (robots exploring independently so far: the benchmark's late
+        oracle) interacts from now on.
         """
         transforms = np.asarray(transform, dtype=np.float64).reshape(-1, 3)
         if len(transforms) != self.n_robots - 1:
@@ -475,6 +478,8 @@ class TeamCoordinator:
                 f"start_coordinated needs {self.n_robots - 1} transforms, got {len(transforms)}"
             )
         self._maps = maps
+        if not self.config.interaction:
+            self.config = replace(self.config, interaction=True)
         self._decide("relative pose given (oracle): coordinated exploration on the merged map")
         for robot in range(self.n_robots):
             self._release(robot)

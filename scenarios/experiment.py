@@ -455,7 +455,6 @@ def _run_experiment(config: RunConfig) -> dict[str, Any]:
                 while env.agents and received() is None:
                     if steps + 1 == config.given_at and config.given_transforms is not None:
                         # The late oracle: from this step on the team coordinates.
-                        team.config = replace(team.config, interaction=True)
                         team.start_coordinated(np.array(config.given_transforms), maps)
                     if config.single:
                         actions = [team.act_alone(0, observations[agents[0]], maps(0))]
