@@ -4,6 +4,7 @@ team size (issue 37: a 60 m building must be explorable), never below 3000 steps
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -38,28 +39,20 @@ def test_the_budget_of_the_shipped_worlds(scenario: str, grows: bool) -> None:
     assert (budget > 4 * MIN_STEPS) if grows else (budget <= 1.5 * MIN_STEPS)
 
 
-def test_a_run_without_max_steps_reports_the_budget_it_chose(tmp_path: Path) -> None:
+def _run(tmp_path: Path, **fields: Any) -> dict[str, Any]:
+    """A run in ``tb3_sandbox`` (19 m² of floor), nothing written but its report."""
     config = RunConfig(
-        scenario="tb3_sandbox",
-        out=tmp_path,
-        record=False,
-        figure=False,
-        progress=False,
-        until_merged=False,
+        scenario="tb3_sandbox", out=tmp_path, record=False, figure=False, progress=False, **fields
     )
-    report = run_experiment(config)
+    return run_experiment(config)
+
+
+def test_a_run_without_max_steps_reports_the_budget_it_chose(tmp_path: Path) -> None:
+    report = _run(tmp_path, until_merged=False)
     assert report["max_steps"] == MIN_STEPS  # 19 m² of floor
     assert report["steps"] < MIN_STEPS  # it stopped at the target coverage
 
 
 def test_max_steps_overrides_the_budget(tmp_path: Path) -> None:
-    config = RunConfig(
-        scenario="tb3_sandbox",
-        out=tmp_path,
-        record=False,
-        figure=False,
-        progress=False,
-        max_steps=5,
-    )
-    report = run_experiment(config)
+    report = _run(tmp_path, max_steps=5)
     assert report["max_steps"] == 5 and report["steps"] == 5
